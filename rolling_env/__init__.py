@@ -1,0 +1,37 @@
+"""rolling-drive: MDR simulation and control of the oscillating-rolling nanodrive.
+
+``import rolling_env`` registers ``RollingDrive-v0`` with Gymnasium.
+"""
+from __future__ import annotations
+
+import gymnasium as gym
+
+__version__ = "0.1.0"
+
+DEFAULT_EPISODE_STEPS = 512  # the shipped scenes' episode_steps
+
+if "RollingDrive-v0" not in gym.registry:
+    gym.register(
+        id="RollingDrive-v0",
+        entry_point="rolling_env.env:RollingDriveEnv",
+        vector_entry_point="rolling_env.vector:make_vector_env",
+        # TimeLimit comes from registration: the env itself never truncates.
+        max_episode_steps=DEFAULT_EPISODE_STEPS,
+    )
+
+
+def make(scene="default", **kwargs):
+    """``gym.make("RollingDrive-v0", scene=...)`` with the scene's own ``episode_steps``."""
+    from .scenes import load_scene
+    sc = load_scene(scene, **{k: v for k, v in kwargs.items() if k not in _MAKE_KEYS})
+    extra = {k: v for k, v in kwargs.items() if k in _MAKE_KEYS}
+    extra.setdefault("max_episode_steps", sc.episode_steps)
+    return gym.make("RollingDrive-v0", scene=sc, **extra)
+
+
+_MAKE_KEYS = ("render_mode", "max_episode_steps", "disable_env_checker")
+
+
+def list_scenes():
+    from .scenes import list_scenes as _ls
+    return _ls()

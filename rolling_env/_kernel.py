@@ -1,0 +1,506 @@
+"""Private numba kernels of the finite-volume MDR contact (see ``rolling_env.model`` for the checked API).
+
+Discretisation
+--------------
+The 1-D MDR spring row is treated as the continuum it approximates: cell ``i`` covers
+``[x_lo + i dx, x_lo + (i+1) dx]`` and stores the tangential *content*
+``U_i = integral of uT over (cell intersected with contact)``.  Within a cell the deflection is
+taken uniform (``uT = U_i / l_i`` with ``l_i`` the exact overlap of cell and contact).  Over a
+sub-step the patch centre ``c`` moves linearly, so the overlap of every cell is piecewise linear
+in time; the kernel integrates the creep ODE *exactly* over each linear piece
+(``_walk``):
+
+* entry (leading edge inside the cell)   ``dU/dt = s l``               (new material has uT = 0)
+* full  (cell inside the contact)        ``dU/dt = s l``
+* exit  (trailing edge inside the cell)  ``d(U/l)/dt = s``             (released material carries the mean)
+* both  (contact narrower than a cell)   ``d(U/l)/dt = s - |u| (U/l) / l``
+
+with ``s = omega R - v - v*`` the creep rate.  Because the result is affine in ``s``, each cell
+returns ``U_end = A + B s``; the runner equation (backward Euler, implicit in ``v*``) is then
+solved exactly for infinite friction and by a safeguarded Newton/bisection on the monotone
+piecewise-linear force for finite friction.  Entry and exit times inside a sub-step, partial
+cells at both contact edges and the conservative remap when the contact radius jumps are all
+exact within the uniform-cell model, which makes the error smooth and second order in ``dx``.
+
+Units are whatever the caller scales to (``model.Drive`` uses length a_ref, time t_ref and
+force G* a_ref^2, so ``G* = 1`` here and ``E_over_G = E*/G*``).
+
+Feature specialisation: ``mu``, ``mass`` and ``load`` are ``None`` or float.  numba prunes the
+``is None`` branches at compile time, so every scene gets a kernel that contains only what it
+needs (no slip checks with infinite friction, no dynamics for a prescribed runner, no load term
+without a load); each combination is compiled and cached once.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+# ----------------------------------------------------------------------------- state layout
+ST_C = 0        # patch centre c (spring frame)
+ST_A = 1        # contact half-width a currently in force
+ST_D = 2        # indentation d currently in force
+ST_VS = 3       # runner velocity v*
+ST_XS = 4       # runner displacement x*
+ST_XSPH = 5     # sphere translation (integral of v dt)
+ST_T = 6        # tangential force T
+ST_IMP = 7      # cumulative impulse of T
+ST_SLIP = 8     # cumulative slip work (friction dissipation, wear measure)
+ST_REL = 9      # cumulative release work (elastic energy carried off by released material)
+ST_DRIVE = 10   # cumulative drive work  integral T (omega R - v) dt
+ST_RUNNER = 11  # cumulative work of T on the runner  integral T v* dt
+ST_EXT = 12     # cumulative work of F_ext on the runner
+ST_TIME = 13    # time
+ST_FLAG = 14    # error flags (bit field, see FLAG_*)
+ST_ITER = 15    # cumulative Newton iterations (finite friction, free runner)
+N_STATE = 16
+
+FLAG_GRID = 1       # the contact reached the end of the spring row
+FLAG_NONFINITE = 2  # a non-finite value appeared (kernel stopped)
+FLAG_SLIDE = 4      # massless runner with no force equilibrium (|F_ext| > mu N)
+
+# per-tick outputs
+OUT_T = 0         # T at the end of the tick
+OUT_IMP = 1       # impulse of T over the tick
+OUT_VS = 2        # v* at the end of the tick
+OUT_XS = 3        # x* at the end of the tick
+OUT_SLIP = 4      # slip work during the tick
+OUT_C = 5         # patch centre at the end of the tick
+OUT_N = 6         # normal force
+OUT_STICK = 7     # stuck fraction of the contact length at the end of the tick (1 with mu = inf)
+N_OUT = 8
+
+# params vector
+P_R = 0
+P_E_OVER_G = 1
+P_X_LO = 2
+P_DX = 3
+N_PARAM = 4
+
+
+@njit(cache=True, inline="always")
+def _overlap(xL, xR, c, a):
+    lo = max(xL, c - a)
+    hi = min(xR, c + a)
+    return hi - lo if hi > lo else 0.0
+
+
+@njit(cache=True, inline="always")
+def _normal_content(xL, xR, c, a, d, R):
+    """Integral of uN = d - (x - c)^2 / R over the cell's part in contact."""
+    lo = max(xL, c - a)
+    hi = min(xR, c + a)
+    if hi <= lo:
+        return 0.0
+    zl = lo - c
+    zh = hi - c
+    val = d * (hi - lo) - (zh * zh * zh - zl * zl * zl) / (3.0 * R)
+    return val if val > 0.0 else 0.0
+
+
+@njit(cache=True)
+def _walk(U0, xL, xR, c0, a, u, dt, res):
+    """Exact creep integration of one cell over a sub-step (uniform-cell model).
+
+    Writes into ``res``: [A, B, IA, IB, e0, e1, e2] with
+    U_end = A + B s, integral of U dt = IA + IB s, released elastic energy (G* = 1)
+    = e0 + e1 s + e2 s^2.  The patch centre moves from c0 to c0 + u dt.
+    """
+    A = U0
+    B = 0.0
+    IA = 0.0
+    IB = 0.0
+    e0 = 0.0
+    e1 = 0.0
+    e2 = 0.0
+    if u == 0.0:
+        ell = _overlap(xL, xR, c0, a)
+        res[0] = A
+        res[1] = ell * dt
+        res[2] = A * dt
+        res[3] = 0.5 * ell * dt * dt
+        res[4] = 0.0
+        res[5] = 0.0
+        res[6] = 0.0
+        return
+    au = abs(u)
+    if u > 0.0:
+        pL = xL
+        pR = xR
+        p = c0
+    else:
+        pL = -xR
+        pR = -xL
+        p = -c0
+    p_end = p + au * dt
+    b0 = pL - a
+    b1 = min(pR - a, pL + a)
+    b2 = max(pR - a, pL + a)
+    b3 = pR + a
+    wide = (pR - pL) <= 2.0 * a
+    if p_end <= b0 or p >= b3:
+        res[0] = 0.0 if p >= b3 else A
+        res[1] = 0.0
+        res[2] = res[0] * dt
+        res[3] = 0.0
+        res[4] = 0.0
+        res[5] = 0.0
+        res[6] = 0.0
+        return
+    # walk the pieces [b0, b1) entry, [b1, b2) full or both, [b2, b3) exit
+    if p < b0:
+        p = b0  # no contact before b0: nothing changes (U0 is 0 there)
+    while p < p_end:
+        if p < b1:
+            q = min(b1, p_end)
+            dtp = (q - p) / au
+            la = p + a - pL
+            IA += A * dtp
+            IB += B * dtp + 0.5 * la * dtp * dtp + au * dtp * dtp * dtp / 6.0
+            B += dtp * (la + 0.5 * au * dtp)
+        elif p < b2:
+            q = min(b2, p_end)
+            dtp = (q - p) / au
+            if wide:
+                ell = pR - pL
+                IA += A * dtp
+                IB += B * dtp + 0.5 * ell * dtp * dtp
+                B += ell * dtp
+            else:
+                ell = 2.0 * a
+                k = au / ell
+                em1 = -math.expm1(-k * dtp)        # 1 - exp(-k dt)
+                em2 = -math.expm1(-2.0 * k * dtp)  # 1 - exp(-2 k dt)
+                g = ell / k
+                # U(t) = alpha(t) + s beta(t), alpha = A e^{-kt}, beta = g + (B - g) e^{-kt}
+                IA += A * em1 / k
+                IB += B * em1 / k + g * (dtp - em1 / k)
+                c2 = 0.5 * au / (ell * ell)
+                e0 += c2 * A * A * em2 / (2.0 * k)
+                e1 += c2 * 2.0 * A * (g * em1 / k + (B - g) * em2 / (2.0 * k))
+                e2 += c2 * (g * g * dtp + 2.0 * g * (B - g) * em1 / k
+                            + (B - g) * (B - g) * em2 / (2.0 * k))
+                A = A * (1.0 - em1)
+                B = B * (1.0 - em1) + g * em1
+        elif p < b3:
+            q = min(b3, p_end)
+            dtp = (q - p) / au
+            la = pR + a - p
+            lb = pR + a - q
+            if la > 0.0:
+                mA = A / la
+                mB = B / la
+                J0 = la * dtp - 0.5 * au * dtp * dtp
+                J1 = 0.5 * la * dtp * dtp - au * dtp * dtp * dtp / 3.0
+                IA += mA * J0
+                IB += mB * J0 + J1
+                h = 0.5 * au
+                e0 += h * mA * mA * dtp
+                e1 += h * 2.0 * mA * (mB * dtp + 0.5 * dtp * dtp)
+                e2 += h * (mB * mB * dtp + mB * dtp * dtp + dtp * dtp * dtp / 3.0)
+                A = mA * lb
+                B = (mB + dtp) * lb
+            else:
+                A = 0.0
+                B = 0.0
+        else:
+            q = p_end
+            A = 0.0
+            B = 0.0
+        p = q
+    res[0] = A
+    res[1] = B
+    res[2] = IA
+    res[3] = IB
+    res[4] = e0
+    res[5] = e1
+    res[6] = e2
+
+
+@njit(cache=True)
+def _set_radius(U, st, p, a_new):
+    """Conservative remap when the contact half-width jumps from st[ST_A] to a_new.
+
+    Shrinking releases the cut-off part of each edge cell (uniform content), growing adds
+    material with zero deflection (content unchanged)."""
+    a_old = st[ST_A]
+    if a_new == a_old:
+        return
+    c = st[ST_C]
+    x_lo = p[P_X_LO]
+    dx = p[P_DX]
+    n = U.shape[0]
+    if a_new < a_old:
+        i0 = max(int(math.floor((c - a_old - x_lo) / dx)), 0)
+        i1 = min(int(math.floor((c + a_old - x_lo) / dx)), n - 1)
+        rel = 0.0
+        T = 0.0
+        for i in range(i0, i1 + 1):
+            xL = x_lo + i * dx
+            lo = _overlap(xL, xL + dx, c, a_old)
+            ln = _overlap(xL, xL + dx, c, a_new)
+            if lo > 0.0 and ln < lo:
+                Ui = U[i]
+                Un = Ui * ln / lo
+                rel += 0.5 * Ui * Ui / lo - (0.5 * Un * Un / ln if ln > 0.0 else 0.0)
+                U[i] = Un
+            T += U[i]
+        st[ST_REL] += rel
+        st[ST_T] = T
+    st[ST_A] = a_new
+
+
+@njit(cache=True)
+def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
+    """Advance one control tick of n_sub sub-steps with piecewise-constant inputs.
+
+    d: indentation, u: omega R (signed), v: sphere translation rate (signed),
+    vs_presc: runner velocity when ``mass is None`` (prescribed runner), else ignored.
+    mu / mass / load: float or None (infinite friction / prescribed runner / no load).
+    """
+    R = p[P_R]
+    EG = p[P_E_OVER_G]
+    x_lo = p[P_X_LO]
+    dx = p[P_DX]
+    n = U.shape[0]
+    res = np.empty(7)
+    a = math.sqrt(R * d) if d > 0.0 else 0.0
+    _set_radius(U, st, p, a)
+    st[ST_D] = d
+    s0 = u - v
+    slip_tick = 0.0
+    imp_tick = 0.0
+    for _ in range(n_sub):
+        c0 = st[ST_C]
+        c1 = c0 + u * dt
+        v0 = st[ST_VS]
+        T0 = st[ST_T]
+        # cells touched: union of the contact at c0 and c1
+        i0 = int(math.floor((min(c0, c1) - a - x_lo) / dx))
+        i1 = int(math.floor((max(c0, c1) + a - x_lo) / dx))
+        if i0 < 0 or i1 > n - 1:
+            st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_GRID
+            i0 = max(i0, 0)
+            i1 = min(i1, n - 1)
+        full_lo = max(c0, c1) - a
+        full_hi = min(c0, c1) + a
+        SA = 0.0
+        SB = 0.0
+        SIA = 0.0
+        SIB = 0.0
+        E0 = 0.0
+        E1 = 0.0
+        E2 = 0.0
+        SL = 0.0
+        if a > 0.0:
+            for i in range(i0, i1 + 1):
+                xL = x_lo + i * dx
+                xR = xL + dx
+                if xL >= full_lo and xR <= full_hi:
+                    Ai = U[i]
+                    Bi = dx * dt
+                    SIA += Ai * dt
+                    SIB += 0.5 * dx * dt * dt
+                else:
+                    _walk(U[i], xL, xR, c0, a, u, dt, res)
+                    Ai = res[0]
+                    Bi = res[1]
+                    SIA += res[2]
+                    SIB += res[3]
+                    E0 += res[4]
+                    E1 += res[5]
+                    E2 += res[6]
+                A[i] = Ai
+                B[i] = Bi
+                SA += Ai
+                SB += Bi
+                if mu is not None:
+                    Li = mu * EG * _normal_content(xL, xR, c1, a, d, R)
+                    L[i] = Li
+                    SL += Li
+        else:
+            for i in range(i0, i1 + 1):
+                A[i] = 0.0
+                B[i] = 0.0
+                if mu is not None:
+                    L[i] = 0.0
+        # ---------------------------------------------------------------- runner velocity
+        if mass is None:
+            v1 = vs_presc
+        else:
+            F = 0.0
+            if load is not None:
+                F = load
+            if mu is None:
+                den = mass + dt * SB
+                if den > 0.0:
+                    v1 = (mass * v0 + dt * (SA + s0 * SB + F)) / den
+                else:
+                    v1 = 0.0  # massless runner without contact (F must be 0)
+            else:
+                # bracket in v: all cells saturated on either side
+                s_hi = -np.inf
+                s_lo = np.inf
+                for i in range(i0, i1 + 1):
+                    Bi = B[i]
+                    if Bi > 0.0:
+                        sh = (L[i] - A[i]) / Bi
+                        sl = (-L[i] - A[i]) / Bi
+                        if sh > s_hi:
+                            s_hi = sh
+                        if sl < s_lo:
+                            s_lo = sl
+                if s_hi < s_lo:  # no cell in contact
+                    s_hi = 0.0
+                    s_lo = 0.0
+                v_lo = s0 - s_hi
+                v_hi = s0 - s_lo
+                if mass > 0.0:
+                    v_lo = min(v_lo, v0 + dt * (F - SL) / mass)
+                    v_hi = max(v_hi, v0 + dt * (F + SL) / mass)
+                if mass == 0.0 and SL <= abs(F) and (SL > 0.0 or F != 0.0):
+                    st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_SLIDE
+                vv = min(max(v0, v_lo), v_hi)
+                scale = mass * (abs(v_lo) + abs(v_hi)) + dt * (SL + abs(F)) + 1e-300
+                for _it in range(200):
+                    st[ST_ITER] += 1.0
+                    s = s0 - vv
+                    Tt = 0.0
+                    dT = 0.0
+                    for i in range(i0, i1 + 1):
+                        Ut = A[i] + B[i] * s
+                        Li = L[i]
+                        if Ut > Li:
+                            Tt += Li
+                        elif Ut < -Li:
+                            Tt -= Li
+                        else:
+                            Tt += Ut
+                            dT += B[i]
+                    g = mass * (vv - v0) - dt * (Tt + F)
+                    if abs(g) <= 1e-14 * scale:
+                        break
+                    if g > 0.0:
+                        v_hi = vv
+                    else:
+                        v_lo = vv
+                    if v_hi - v_lo <= 1e-15 * (abs(v_lo) + abs(v_hi)) + 1e-300:
+                        break
+                    gp = mass + dt * dT
+                    vn = vv - g / gp if gp > 0.0 else 0.5 * (v_lo + v_hi)
+                    if not (vn > v_lo and vn < v_hi):
+                        vn = 0.5 * (v_lo + v_hi)
+                    vv = vn
+                v1 = vv
+        s = s0 - v1
+        # ---------------------------------------------------------------- commit
+        T1 = 0.0
+        slip = 0.0
+        for i in range(i0, i1 + 1):
+            Ut = A[i] + B[i] * s
+            if mu is not None:
+                Li = L[i]
+                if Ut > Li:
+                    xL = x_lo + i * dx
+                    ell = _overlap(xL, xL + dx, c1, a)
+                    if ell > 0.0:
+                        slip += Li * (Ut - Li) / ell
+                    Ut = Li
+                elif Ut < -Li:
+                    xL = x_lo + i * dx
+                    ell = _overlap(xL, xL + dx, c1, a)
+                    if ell > 0.0:
+                        slip += Li * (-Li - Ut) / ell
+                    Ut = -Li
+            U[i] = Ut
+            T1 += Ut
+        if mu is None:
+            imp = SIA + SIB * s  # exact integral of T over the sub-step
+        else:
+            imp = 0.5 * (T0 + T1) * dt  # clipped force: trapezoid (first order in dt)
+        st[ST_C] = c1
+        st[ST_VS] = v1
+        st[ST_XS] += v1 * dt
+        st[ST_XSPH] += v * dt
+        st[ST_T] = T1
+        st[ST_IMP] += imp
+        st[ST_SLIP] += slip
+        st[ST_REL] += E0 + s * (E1 + s * E2)
+        st[ST_DRIVE] += s0 * imp
+        st[ST_RUNNER] += v1 * imp
+        if load is not None:
+            st[ST_EXT] += load * v1 * dt
+        st[ST_TIME] += dt
+        slip_tick += slip
+        imp_tick += imp
+    T1 = st[ST_T]
+    out[OUT_T] = T1
+    out[OUT_IMP] = imp_tick
+    out[OUT_VS] = st[ST_VS]
+    out[OUT_XS] = st[ST_XS]
+    out[OUT_SLIP] = slip_tick
+    out[OUT_C] = st[ST_C]
+    out[OUT_N] = 4.0 / 3.0 * EG * a * d
+    # stuck fraction of the contact length
+    if mu is None or a == 0.0:
+        out[OUT_STICK] = 1.0 if a > 0.0 else 0.0
+    else:
+        c = st[ST_C]
+        i0 = max(int(math.floor((c - a - x_lo) / dx)), 0)
+        i1 = min(int(math.floor((c + a - x_lo) / dx)), n - 1)
+        stuck = 0.0
+        for i in range(i0, i1 + 1):
+            if abs(U[i]) < L[i] * (1.0 - 1e-12):
+                xL = x_lo + i * dx
+                stuck += _overlap(xL, xL + dx, c, a)
+        out[OUT_STICK] = stuck / (2.0 * a)
+    if not (math.isfinite(T1) and math.isfinite(st[ST_VS]) and math.isfinite(st[ST_XS])):
+        st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_NONFINITE
+
+
+@njit(cache=True)
+def run_ticks(U, A, B, L, st, p, d, u, v, vs, mu, mass, load, n_sub, dt, out):
+    """Run len(d) ticks; out has shape (len(d), N_OUT).  Stops at the first error flag."""
+    for k in range(d.shape[0]):
+        _tick(U, A, B, L, st, p, d[k], u[k], v[k], vs[k], mu, mass, load, n_sub, dt, out[k])
+        if st[ST_FLAG] != 0.0 and (int(st[ST_FLAG]) & (FLAG_NONFINITE | FLAG_GRID)) != 0:
+            return k + 1
+    return d.shape[0]
+
+
+@njit(cache=True, parallel=True)
+def run_tick_batch(U, A, B, L, st, p, d, u, v, vs, mu, mass, load, n_sub, dt, out):
+    """One tick for each of the n_env rows (arrays with a leading env axis), in parallel."""
+    for e in prange(U.shape[0]):
+        _tick(U[e], A[e], B[e], L[e], st[e], p[e], d[e], u[e], v[e], vs[e],
+              mu, mass, load, n_sub, dt, out[e])
+
+
+@njit(cache=True)
+def run_tick_batch_serial(U, A, B, L, st, p, d, u, v, vs, mu, mass, load, n_sub, dt, out):
+    """Serial twin of run_tick_batch (small batches, or where threads do not pay)."""
+    for e in range(U.shape[0]):
+        _tick(U[e], A[e], B[e], L[e], st[e], p[e], d[e], u[e], v[e], vs[e],
+              mu, mass, load, n_sub, dt, out[e])
+
+
+@njit(cache=True)
+def elastic_energy(U, st, p):
+    """Tangential elastic energy 1/2 sum U_i^2 / l_i (G* = 1 units)."""
+    c = st[ST_C]
+    a = st[ST_A]
+    x_lo = p[P_X_LO]
+    dx = p[P_DX]
+    n = U.shape[0]
+    if a <= 0.0:
+        return 0.0
+    i0 = max(int(math.floor((c - a - x_lo) / dx)), 0)
+    i1 = min(int(math.floor((c + a - x_lo) / dx)), n - 1)
+    e = 0.0
+    for i in range(i0, i1 + 1):
+        xL = x_lo + i * dx
+        ell = _overlap(xL, xL + dx, c, a)
+        if ell > 0.0:
+            e += 0.5 * U[i] * U[i] / ell
+    return e

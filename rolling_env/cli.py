@@ -1,0 +1,96 @@
+"""Command line: ``rolling-drive SUBCOMMAND ...`` (also ``python -m rolling_env``).
+
+Each subcommand lives in ``rolling_env.commands.<module>`` and provides
+``register(subparsers)``, which adds its parser and sets ``func`` (args -> exit code).
+Bad arguments give a one-line error naming the parameter and exit code 2.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import math
+import sys
+
+COMMAND_MODULES = ["physics", "figures", "converge", "stability", "bench", "rollout"]
+
+
+def finite_float(name, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=False, allow_inf=False):
+    """argparse type: a float checked by ``validation.check_range`` (message names the parameter)."""
+    from .validation import check_range
+
+    def conv(text):
+        try:
+            x = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
+        try:
+            return check_range(name, x, lo, hi, lo_open=lo_open, hi_open=hi_open,
+                               allow_inf=allow_inf)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+    conv.__name__ = name
+    return conv
+
+
+def positive_int(name, lo=1, hi=10**9):
+    def conv(text):
+        try:
+            x = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be an integer, got {text!r}") from None
+        if not lo <= x <= hi:
+            raise argparse.ArgumentTypeError(f"{name} must be an integer in [{lo}, {hi}], got {x}")
+        return x
+    conv.__name__ = name
+    return conv
+
+
+def emit(result: dict, as_json: bool, human: str) -> None:
+    """Print one JSON object on stdout, or a human summary."""
+    if as_json:
+        print(json.dumps(result, default=_json_default))
+    else:
+        print(human)
+
+
+def _json_default(o):
+    import numpy as np
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    return str(o)
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit code 2
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="rolling-drive", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    for name in COMMAND_MODULES:
+        try:
+            mod = importlib.import_module(f"rolling_env.commands.{name}")
+        except ModuleNotFoundError as e:
+            if e.name == f"rolling_env.commands.{name}":
+                continue
+            raise
+        mod.register(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except ValueError as e:  # validation errors from the library: one line, exit 2
+        print(f"rolling-drive {args.command}: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,251 @@
+"""The paper's numerical experiments as pure functions (used by the CLI, tests and scripts).
+
+* ``working_point``: quasi-static working point v*/(omega R) from the zero-impulse condition
+  (Eq. 31), infinite friction and runner mass.
+* ``simulate``: the same square wave driving a runner of finite mass (and friction).
+* ``mindlin``: Cattaneo-Mindlin tangential loading of a pressed sphere.
+* ``force_sum`` / ``impulse``: the steady force sum and the period impulse (paper Figs. 6, 8).
+
+Dimensionless inputs follow the paper; the SI geometry only matters with finite friction
+(a1/R and G*/E*) and is fixed by ``Geometry``.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import brentq
+
+from . import analytic
+from .excitation import SquareWave
+from .model import Drive, DriveParams
+from .validation import check_range
+
+DEFAULT_RESOLUTION = 64.0  # springs per a1; chosen from results/work_precision.csv (README)
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """SI geometry behind the dimensionless runs: sphere radius R [m], E* [Pa],
+    a1/R (``a_over_r``) and G*/E* (``g_over_e``), period tau [s]."""
+
+    R: float = 1e-3
+    E_star: float = 115e9
+    a_over_r: float = 0.02
+    g_over_e: float = 2 * (1 - 0.3) / (2 - 0.3)
+    tau: float = 1e-3
+
+    def __post_init__(self):
+        check_range("a_over_r", self.a_over_r, 0.0, 0.5, lo_open=True)
+        check_range("g_over_e", self.g_over_e, 0.0, 10.0, lo_open=True)
+
+    @property
+    def a1(self) -> float:
+        return self.a_over_r * self.R
+
+    @property
+    def G_star(self) -> float:
+        return self.g_over_e * self.E_star
+
+
+def _drive(wave: SquareWave, geo: Geometry, params: DriveParams, resolution: float) -> Drive:
+    return Drive(params, a_ref=wave.a1, resolution=resolution, stroke=wave.stroke,
+                 a_max=wave.a1, t_ref=wave.tau)
+
+
+def _check_common(delta, eps, w, resolution):
+    check_range("delta", delta, 0.0, 1.0, lo_open=True)
+    check_range("eps", eps, -1e3, 1e3)
+    check_range("w", w, 0.0, 1e4, lo_open=True)
+    check_range("resolution", resolution, 2.0, 1e5)
+
+
+def period_impulse(delta, eps, w, vstar_ratio, *, resolution=DEFAULT_RESOLUTION, periods=3,
+                   geo: Geometry = Geometry(), ticks_per_half=1, n_sub=1):
+    """Impulse of T over the last of ``periods`` periods with a prescribed runner
+    (infinite friction), normalised as I / (2 G* a1^2 tau) (paper Fig. 8)."""
+    wave = SquareWave(delta, eps, w, geo.a1, geo.R, geo.tau)
+    drv = _drive(wave, geo, DriveParams(geo.R, geo.E_star, geo.G_star), resolution)
+    drv.reset()
+    d, u, v = wave.ticks(periods, ticks_per_half)
+    out = drv.run(dt_tick=wave.dt_tick(ticks_per_half), n_sub=n_sub, omega_R=u, v=v, d=d,
+                  vstar=vstar_ratio * wave.omega_R)
+    per = 2 * ticks_per_half
+    I = out["impulse"][-per:].sum()
+    return I / (2 * geo.G_star * wave.a1 ** 2 * wave.tau)
+
+
+def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
+                  geo: Geometry = Geometry()):
+    """Simulated working point v*/(omega R): the zero of the period impulse (Eq. 31).
+
+    With infinite friction and a prescribed runner the impulse is affine in v*, so two runs
+    give the zero exactly.  Returns a dict with ``simulated``, ``eq32`` (None for w < 2),
+    ``eq29``, ``rel_error`` and ``seconds``."""
+    _check_common(delta, eps, w, resolution)
+    t0 = time.perf_counter()
+    i0 = period_impulse(delta, eps, w, 0.0, resolution=resolution, periods=periods, geo=geo)
+    i1 = period_impulse(delta, eps, w, 0.1, resolution=resolution, periods=periods, geo=geo)
+    sim = -0.1 * i0 / (i1 - i0)
+    seconds = time.perf_counter() - t0
+    eq32 = float(analytic.eq32(delta, eps, w)) if w >= 2 else None
+    res = {
+        "simulated": float(sim),
+        "eq32": eq32,
+        "eq29": float(analytic.eq29(delta, eps)),
+        "rel_error": (abs(sim - eq32) / abs(eq32) if eq32 not in (None, 0.0) else None),
+        "seconds": seconds,
+        "delta": delta, "eps": eps, "w": w, "resolution": resolution,
+    }
+    if w < 2:
+        res["note"] = "Eq. 32 holds for w >= 2 only; eq32 is null here"
+        try:
+            res["working_point_ratio"] = float(analytic.working_point_ratio(delta, eps, w))
+        except ValueError as e:
+            res["working_point_ratio"] = None
+            res["note"] += f"; {e}"
+    return res
+
+
+def force_sum(delta, eps, w, vstar_ratio, *, resolution=DEFAULT_RESOLUTION, periods=2,
+              geo: Geometry = Geometry(), ticks_per_half=8):
+    """Steady rolling force sum (T1 + T2)/(2 G* a1^2) (paper Fig. 6): T at the end of the last
+    forth and back steps with a prescribed runner (steady for w >= 2)."""
+    wave = SquareWave(delta, eps, w, geo.a1, geo.R, geo.tau)
+    drv = _drive(wave, geo, DriveParams(geo.R, geo.E_star, geo.G_star), resolution)
+    drv.reset()
+    d, u, v = wave.ticks(periods, ticks_per_half)
+    out = drv.run(dt_tick=wave.dt_tick(ticks_per_half), n_sub=1, omega_R=u, v=v, d=d,
+                  vstar=vstar_ratio * wave.omega_R)
+    T = out["T"]
+    T1 = T[-ticks_per_half - 1]
+    T2 = T[-1]
+    return (T1 + T2) / (2 * geo.G_star * wave.a1 ** 2)
+
+
+def natural_frequency_mass(r: float, wave: SquareWave, G_star: float) -> float:
+    """Runner mass m [kg] for omega_n / Omega = r with omega_n = sqrt(2 a1 G*/m), Omega = 2 pi/tau."""
+    if r == 0:
+        return math.inf
+    if math.isinf(r):
+        return 0.0
+    Omega = 2 * math.pi / wave.tau
+    return 2 * wave.a1 * G_star / (r * Omega) ** 2
+
+
+def simulate(delta, eps, w, omega_n_ratio, *, mu=math.inf, periods=40,
+             resolution=DEFAULT_RESOLUTION, geo: Geometry = Geometry(), ticks_per_half=1,
+             n_sub=None, direction=1, F_ext=0.0, vstar0_ratio=0.0, record=False):
+    """Square-wave excitation driving a free runner of mass m (omega_n/Omega = r).
+
+    r = omega_n / Omega with omega_n = sqrt(2 a1 G*/m) and Omega = 2 pi / tau; r = inf is a
+    massless runner (force equilibrium), r = 0 an infinitely heavy one: it moves at the
+    constant velocity whose period impulse vanishes (the steady state every heavy runner
+    relaxes to), found by root finding on the simulated impulse.  ``vstar0_ratio`` is the
+    runner's initial v*/(omega R).
+
+    Returns ``mean_v_star_over_omega_R`` (mean runner velocity over the second half of the
+    periods, paper convention), ``slip_work`` (per period, in units of 2 G* a1^3),
+    ``energy_residual`` (residual / drive work: positive = dissipated by the numerics),
+    ``seconds``; with ``record`` also the per-tick trajectory."""
+    _check_common(delta, eps, w, resolution)
+    check_range("omega_n_ratio", omega_n_ratio, 0.0, math.inf, allow_inf=True)
+    check_range("mu", mu, 0.0, math.inf, lo_open=True, allow_inf=True)
+    check_range("vstar0_ratio", vstar0_ratio, -1e3, 1e3)
+    if int(periods) != periods or periods < 2:
+        raise ValueError(f"periods must be an integer >= 2, got {periods}")
+    wave = SquareWave(delta, eps, w, geo.a1, geo.R, geo.tau, direction)
+    m = natural_frequency_mass(omega_n_ratio, wave, geo.G_star)
+    if math.isinf(m) and F_ext != 0.0:
+        raise ValueError("F_ext needs a finite runner mass (omega_n_ratio > 0)")
+    if n_sub is None:
+        n_sub = default_substeps(omega_n_ratio, wave, resolution, ticks_per_half)
+    d, u, v = wave.ticks(int(periods), ticks_per_half)
+    dt_tick = wave.dt_tick(ticks_per_half)
+    params = DriveParams(geo.R, geo.E_star, geo.G_star, mu=mu, m=m, F_ext=F_ext)
+
+    def run(vstar_ratio=None):
+        drv = _drive(wave, geo, params, resolution)
+        drv.reset(vstar0=direction * vstar0_ratio * wave.omega_R)
+        vs = None if vstar_ratio is None else np.full(d.size, direction * vstar_ratio * wave.omega_R)
+        return drv, drv.run(dt_tick=dt_tick, n_sub=int(n_sub), omega_R=u, v=v, d=d, vstar=vs)
+
+    per = 2 * ticks_per_half
+    t0 = time.perf_counter()
+    if math.isinf(m):
+        def last_impulse(V):
+            return direction * run(V)[1]["impulse"][-per:].sum()
+        hi = abs(1 - eps) + 1.0
+        V = brentq(last_impulse, -hi, hi, xtol=1e-12 * hi, rtol=1e-12)
+        drv, out = run(V)
+    else:
+        drv, out = run()
+    seconds = time.perf_counter() - t0
+    half = (int(periods) // 2) * per
+    xs = out["xstar"]
+    x_start = xs[-half - 1] if half < xs.shape[0] else 0.0
+    mean_v = (xs[-1] - x_start) / (half * dt_tick)
+    e = drv.energy
+    unit = 2 * geo.G_star * wave.a1 ** 3
+    res = {
+        "mean_v_star_over_omega_R": float(direction * mean_v / wave.omega_R),
+        "slip_work": float(e["slip"] / periods / unit),
+        "energy_residual": float(e["residual"] / (abs(e["drive"]) + abs(e["ext"]) + 1e-300)),
+        "seconds": seconds,
+        "eq32": float(analytic.eq32(delta, eps, w)) if w >= 2 else None,
+        "n_sub": int(n_sub), "resolution": resolution, "periods": int(periods),
+        "omega_n_ratio": omega_n_ratio, "mu": mu,
+    }
+    if record:
+        res["trajectory"] = out
+        res["wave"] = wave
+        res["energy"] = e
+    return res
+
+
+def default_substeps(omega_n_ratio, wave: SquareWave, resolution, ticks_per_half=1) -> int:
+    """Sub-steps per tick: resolve the runner's period (>= 40 steps per 2 pi/omega_n while it is
+    slower than ~100 x the drive) and move the patch at most one cell per sub-step."""
+    tick = wave.dt_tick(ticks_per_half)
+    cells = wave.omega_R * tick / (wave.a1 / resolution)
+    n = max(1.0, cells)
+    r = omega_n_ratio
+    if 0 < r <= 100 and math.isfinite(r):
+        omega_n = r * 2 * math.pi / wave.tau
+        n = max(n, 40 * omega_n * tick / (2 * math.pi))
+    return int(math.ceil(n))
+
+
+def mindlin(mu, *, points=21, resolution=DEFAULT_RESOLUTION, geo: Geometry = Geometry(),
+            n_sub=20):
+    """Cattaneo-Mindlin: press with d1, then displace tangentially up to 1.2 u* (runner held).
+
+    Returns ``u_over_ustar``, ``T_over_muN`` (simulated) and ``analytic`` lists."""
+    check_range("mu", mu, 0.0, math.inf, lo_open=True, hi_open=True)
+    if int(points) != points or points < 2:
+        raise ValueError(f"points must be an integer >= 2, got {points}")
+    check_range("resolution", resolution, 2.0, 1e5)
+    a1 = geo.a1
+    d1 = a1 ** 2 / geo.R
+    params = DriveParams(geo.R, geo.E_star, geo.G_star, mu=mu)
+    drv = Drive(params, a_ref=a1, resolution=resolution, stroke=(0.0, 0.0), a_max=a1,
+                t_ref=geo.tau)
+    drv.reset()
+    ustar = analytic.mindlin_ustar(mu, d1, geo.E_star, geo.G_star)
+    N = analytic.hertz_force(d1, geo.R, geo.E_star)
+    u = np.linspace(0.0, 1.2 * ustar, int(points))
+    du = np.diff(u)
+    dt = geo.tau
+    # no rolling, runner held: creep rate -v = du/dt
+    out = drv.run(dt_tick=dt, n_sub=int(n_sub), omega_R=np.zeros(du.size), v=-du / dt,
+                  d=np.full(du.size, d1), vstar=np.zeros(du.size))
+    T = np.concatenate([[0.0], out["T"]])
+    ana = analytic.mindlin_force(u, mu, N, d1, geo.E_star, geo.G_star)
+    return {
+        "u_over_ustar": (u / ustar).tolist(),
+        "T_over_muN": (T / (mu * N)).tolist(),
+        "analytic": (np.asarray(ana) / (mu * N)).tolist(),
+        "mu": mu, "resolution": resolution,
+    }

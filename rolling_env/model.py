@@ -1,0 +1,290 @@
+"""Checked public wrapper around the MDR kernel: parameters, grid, state and stepping in SI units.
+
+``DriveParams`` is the frozen physics (what a scene fixes), ``Drive`` owns one spring row and its
+state and advances it tick by tick with piecewise-constant inputs (normal force or indentation,
+omega R and v).  The compiled kernel is chosen once, from the feature set of the parameters
+(finite or infinite friction, prescribed or free runner, load or none), see ``_kernel``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _kernel as K
+from .analytic import hertz_indentation
+from .validation import check_range
+
+_INF = math.inf
+
+
+@dataclass(frozen=True)
+class DriveParams:
+    """Physics of one drive, SI units.
+
+    R        sphere radius [m]
+    E_star   effective Young modulus E* [Pa]
+    G_star   effective shear modulus G* [Pa]
+    mu       Coulomb friction coefficient [-]; ``inf`` = no slip checks at all
+    m        runner mass [kg]; ``inf`` = prescribed runner velocity, ``0`` = massless runner
+    F_ext    constant external force on the runner [N] (positive along v*)
+    """
+
+    R: float
+    E_star: float
+    G_star: float
+    mu: float = _INF
+    m: float = _INF
+    F_ext: float = 0.0
+
+    def __post_init__(self):
+        check_range("R", self.R, 0.0, _INF, lo_open=True, hi_open=True)
+        check_range("E_star", self.E_star, 0.0, _INF, lo_open=True, hi_open=True)
+        check_range("G_star", self.G_star, 0.0, _INF, lo_open=True, hi_open=True)
+        check_range("mu", self.mu, 0.0, _INF, allow_inf=True)
+        check_range("m", self.m, 0.0, _INF, allow_inf=True)
+        check_range("F_ext", self.F_ext, -_INF, _INF, lo_open=True, hi_open=True)
+        if self.m == 0.0 and self.F_ext != 0.0:
+            raise ValueError("F_ext must be 0 for a massless runner (m = 0): a load on a "
+                             "massless runner has no equilibrium once the contact slides")
+        if math.isinf(self.m) and self.F_ext != 0.0:
+            raise ValueError("F_ext needs a finite runner mass m (a prescribed runner ignores loads)")
+
+    @property
+    def features(self) -> tuple[bool, bool, bool]:
+        """(finite friction, free runner, load): the structural choices of the kernel."""
+        return (math.isfinite(self.mu), math.isfinite(self.m), self.F_ext != 0.0)
+
+
+@dataclass
+class Grid:
+    """Spring row covering the patch-centre stroke [c_min, c_max] for half-widths up to a_max [m]."""
+
+    c_min: float
+    c_max: float
+    a_max: float
+    dx: float
+    x_lo: float = field(init=False)
+    n: int = field(init=False)
+
+    def __post_init__(self):
+        check_range("dx", self.dx, 0.0, _INF, lo_open=True, hi_open=True)
+        if not (self.c_max >= self.c_min):
+            raise ValueError(f"stroke must satisfy c_min <= c_max, got [{self.c_min}, {self.c_max}]")
+        margin = self.a_max + 2.0 * self.dx
+        self.x_lo = self.c_min - margin
+        self.n = int(math.ceil((self.c_max + margin - self.x_lo) / self.dx)) + 1
+
+
+class Drive:
+    """One MDR spring row with its runner, advanced tick by tick.
+
+    Parameters
+    ----------
+    params : DriveParams
+    a_ref : float
+        Length scale [m] (normally the contact radius at the nominal forth-step force a1).
+        The grid spacing is ``dx = a_ref / resolution``.
+    resolution : float
+        Cells per ``a_ref`` (springs per contact radius).
+    stroke : (float, float)
+        Range of the patch centre c = integral of omega R dt [m] that the row must cover.
+    a_max : float
+        Largest contact half-width that will occur [m].
+    t_ref : float
+        Time scale [s] used inside the kernel (the nominal excitation period is a good choice).
+    """
+
+    def __init__(self, params: DriveParams, *, a_ref: float, resolution: float,
+                 stroke: tuple[float, float], a_max: float, t_ref: float):
+        check_range("a_ref", a_ref, 0.0, _INF, lo_open=True, hi_open=True)
+        check_range("resolution", resolution, 0.5, 1e5)
+        check_range("a_max", a_max, 0.0, _INF, lo_open=True, hi_open=True)
+        check_range("t_ref", t_ref, 0.0, _INF, lo_open=True, hi_open=True)
+        self.params = params
+        self.L0 = float(a_ref)
+        self.t0 = float(t_ref)
+        self.F0 = params.G_star * self.L0 ** 2
+        self.M0 = params.G_star * self.L0 * self.t0 ** 2
+        self.W0 = self.F0 * self.L0
+        dx = a_ref / resolution
+        self.grid = Grid(stroke[0] / self.L0, stroke[1] / self.L0, a_max / self.L0, dx / self.L0)
+        n = self.grid.n
+        if n > 20_000_000:
+            raise ValueError(f"the spring row would need {n} cells: lower resolution or stroke")
+        self._p = np.array([params.R / self.L0, params.E_star / params.G_star,
+                            self.grid.x_lo, self.grid.dx])
+        finite_mu, free, load = params.features
+        self._mu = params.mu if finite_mu else None
+        self._mass = params.m / self.M0 if free else None
+        self._load = params.F_ext / self.F0 if load else None
+        self.U = np.zeros(n)
+        self.A = np.zeros(n)
+        self.B = np.zeros(n)
+        self.L = np.zeros(n if finite_mu else 1)  # no friction limits without friction
+        self.st = np.zeros(K.N_STATE)
+
+    # ------------------------------------------------------------------ state
+    def reset(self, c0: float = 0.0, vstar0: float = 0.0) -> None:
+        """Release every spring, patch centre at c0 [m], runner at rest or at vstar0 [m/s]."""
+        self.U[:] = 0.0
+        self.st[:] = 0.0
+        self.st[K.ST_C] = c0 / self.L0
+        self.st[K.ST_VS] = vstar0 * self.t0 / self.L0
+
+    def get_state(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.U.copy(), self.st.copy()
+
+    def set_state(self, state) -> None:
+        U, st = state
+        self.U[:] = U
+        self.st[:] = st
+
+    # ------------------------------------------------------------------ stepping
+    def run(self, *, dt_tick: float, n_sub: int, omega_R, v, N=None, d=None, vstar=None):
+        """Advance len(omega_R) ticks of length dt_tick [s], n_sub sub-steps each.
+
+        Give the normal force ``N`` [N] or the indentation ``d`` [m] per tick, the signed
+        rolling rate ``omega_R`` [m/s] and translation rate ``v`` [m/s] per tick, and the
+        runner velocity ``vstar`` [m/s] per tick when the runner is prescribed (m = inf).
+        Returns a dict of per-tick arrays in SI (see ``_kernel.OUT_*``).
+        """
+        check_range("dt_tick", dt_tick, 0.0, _INF, lo_open=True, hi_open=True)
+        if int(n_sub) != n_sub or n_sub < 1:
+            raise ValueError(f"n_sub must be an integer >= 1, got {n_sub}")
+        u = _as_ticks("omega_R", omega_R)
+        k = u.shape[0]
+        vv = _as_ticks("v", v, k)
+        if (N is None) == (d is None):
+            raise ValueError("give exactly one of N (normal force) or d (indentation)")
+        if N is not None:
+            NN = _as_ticks("N", N, k)
+            if np.any(NN < 0):
+                raise ValueError("N must be >= 0 (no adhesion)")
+            dd = hertz_indentation(NN, self.params.R, self.params.E_star)
+        else:
+            dd = _as_ticks("d", d, k)
+            if np.any(dd < 0):
+                raise ValueError("d must be >= 0 (no adhesion)")
+        if self._mass is None:
+            if vstar is None:
+                raise ValueError("vstar is required for a prescribed runner (m = inf)")
+            vs = _as_ticks("vstar", vstar, k)
+        else:
+            vs = np.zeros(k)
+        a_max = float(np.sqrt(self.params.R * dd.max())) / self.L0 if k else 0.0
+        if a_max > self.grid.a_max * (1 + 1e-9):
+            raise ValueError(f"contact half-width {a_max * self.L0:.3e} m exceeds the grid's "
+                             f"a_max {self.grid.a_max * self.L0:.3e} m")
+        ts = self.t0 / self.L0
+        out = np.zeros((k, K.N_OUT))
+        done = K.run_ticks(self.U, self.A, self.B, self.L, self.st, self._p,
+                           dd / self.L0, u * ts, vv * ts, vs * ts,
+                           self._mu, self._mass, self._load, int(n_sub),
+                           dt_tick / n_sub / self.t0, out)
+        self._check_flags()
+        return self._to_si(out[:done])
+
+    def _check_flags(self):
+        flag = int(self.st[K.ST_FLAG])
+        if flag & K.FLAG_GRID:
+            raise RuntimeError("the contact left the spring row: the rolling stroke exceeded the "
+                               "grid built for it (enlarge `stroke`)")
+        if flag & K.FLAG_NONFINITE:
+            raise FloatingPointError("the kernel produced a non-finite value")
+
+    def _to_si(self, out):
+        F0, L0, t0 = self.F0, self.L0, self.t0
+        return {
+            "T": out[:, K.OUT_T] * F0,
+            "impulse": out[:, K.OUT_IMP] * F0 * t0,
+            "vstar": out[:, K.OUT_VS] * L0 / t0,
+            "xstar": out[:, K.OUT_XS] * L0,
+            "slip_work": out[:, K.OUT_SLIP] * self.W0,
+            "c": out[:, K.OUT_C] * L0,
+            "N": out[:, K.OUT_N] * F0,
+            "stick_fraction": out[:, K.OUT_STICK],
+        }
+
+    # ------------------------------------------------------------------ diagnostics
+    @property
+    def energy(self) -> dict:
+        """Cumulative energy terms [J] and the balance residual.
+
+        drive = elastic + release + slip + runner_work, runner_work + ext = kinetic (+ numerical
+        dissipation of the implicit step).  ``residual`` = drive + ext - (elastic + release + slip
+        + kinetic), i.e. energy lost to discretisation (positive) or created (negative).
+        """
+        st, W0 = self.st, self.W0
+        elastic = float(K.elastic_energy(self.U, st, self._p)) * W0
+        m = self.params.m
+        kin = 0.0
+        if math.isfinite(m):
+            vs = st[K.ST_VS] * self.L0 / self.t0
+            kin = 0.5 * m * vs * vs
+        e = {
+            "drive": st[K.ST_DRIVE] * W0,
+            "runner": st[K.ST_RUNNER] * W0,
+            "ext": st[K.ST_EXT] * W0,
+            "elastic": elastic,
+            "release": st[K.ST_REL] * W0,
+            "slip": st[K.ST_SLIP] * W0,
+            "kinetic": kin,
+        }
+        if math.isfinite(m):
+            e["residual"] = e["drive"] + e["ext"] - (e["elastic"] + e["release"] + e["slip"]
+                                                     + e["kinetic"])
+        else:  # prescribed runner: its work is supplied by whatever prescribes it
+            e["residual"] = e["drive"] - e["runner"] - (e["elastic"] + e["release"] + e["slip"])
+        return e
+
+    @property
+    def c(self) -> float:
+        return self.st[K.ST_C] * self.L0
+
+    @property
+    def vstar(self) -> float:
+        return self.st[K.ST_VS] * self.L0 / self.t0
+
+    @property
+    def xstar(self) -> float:
+        return self.st[K.ST_XS] * self.L0
+
+    @property
+    def x_sphere(self) -> float:
+        return self.st[K.ST_XSPH] * self.L0
+
+    @property
+    def T(self) -> float:
+        return self.st[K.ST_T] * self.F0
+
+    def profile(self):
+        """Cell centres x [m], uT [m], uN [m] and slip flag along the row (for plots)."""
+        g = self.grid
+        x = (g.x_lo + (np.arange(g.n) + 0.5) * g.dx)
+        c, a, d = self.st[K.ST_C], self.st[K.ST_A], self.st[K.ST_D]
+        xl = g.x_lo + np.arange(g.n) * g.dx
+        ell = np.clip(np.minimum(xl + g.dx, c + a) - np.maximum(xl, c - a), 0.0, None)
+        uT = np.where(ell > 0, self.U / np.where(ell > 0, ell, 1.0), 0.0)
+        uN = np.clip(d - (x - c) ** 2 / self._p[K.P_R], 0.0, None)
+        if self._mu is not None:
+            EG = self._p[K.P_E_OVER_G]
+            slip = (ell > 0) & (np.abs(uT) >= self._mu * EG * uN * (1 - 1e-9))
+        else:
+            slip = np.zeros(g.n, bool)
+        return x * self.L0, uT * self.L0, uN * self.L0, slip
+
+
+def _as_ticks(name, x, k=None):
+    a = np.atleast_1d(np.asarray(x, dtype=np.float64))
+    if a.ndim != 1:
+        raise ValueError(f"{name} must be a scalar or 1-D array of per-tick values")
+    if k is not None:
+        if a.shape[0] == 1 and k != 1:
+            a = np.full(k, a[0])
+        elif a.shape[0] != k:
+            raise ValueError(f"{name} has {a.shape[0]} ticks, expected {k}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be finite (got NaN or inf)")
+    return a

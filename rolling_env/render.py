@@ -1,0 +1,77 @@
+"""Frames of RollingDrive-v0: the contact along the spring row and the runner against its target."""
+from __future__ import annotations
+
+import numpy as np
+
+_FIG = {}
+
+
+def _figure():
+    if "fig" not in _FIG:
+        import matplotlib
+        from matplotlib.figure import Figure
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        matplotlib.rcParams.update({"font.size": 8})
+        fig = Figure(figsize=(6.4, 4.8), dpi=100)
+        FigureCanvasAgg(fig)
+        _FIG["fig"] = fig
+    return _FIG["fig"]
+
+
+def render_frame(env) -> np.ndarray:
+    """uint8 (480, 640, 3) frame: top, normal and tangential deflection along the row with
+    stick (blue) and slip (red) cells; bottom, runner displacement against the target."""
+    fig = _figure()
+    fig.clear()
+    ax1, ax2 = fig.subplots(2, 1)
+    drv = env.drive
+    x, uT, uN, slip = drv.profile()
+    a = max(env.a_max, 1e-30)
+    inc = uN > 0
+    um = 1e9
+    ax1.plot(x / a, uN * um, color="0.3", lw=1, label="normal deflection uN [nm]")
+    ax1b = ax1.twinx()
+    ax1b.bar((x / a)[inc & ~slip], (uT * um)[inc & ~slip], width=drv.grid.dx, color="tab:blue",
+             label="uT stick [nm]")
+    ax1b.bar((x / a)[inc & slip], (uT * um)[inc & slip], width=drv.grid.dx, color="tab:red",
+             label="uT slip [nm]")
+    ax1.set_xlim(-env.scene.stroke_roll / a - 1.2, env.scene.stroke_roll / a + 1.2)
+    ax1.set_xlabel("x / a_max (frame of the sphere)")
+    ax1.set_ylabel("uN [nm]")
+    ax1b.set_ylabel("uT [nm]")
+    o = env._out or {}
+    ax1.set_title(f"{env.scene.name}: N = {o.get('N', 0):.3g} N, T = {o.get('T', 0):.3g} N, "
+                  f"stick {100 * o.get('stick_fraction', 0):.0f}%")
+    h = np.asarray(env._history)
+    t = np.arange(h.size) * env.dt * 1e3
+    ax2.plot(t, h * um, color="tab:green", label="runner x*")
+    ax2.axhline(env.target * um, color="k", ls="--", lw=1, label="target")
+    tol = env.scene.tolerance * um
+    ax2.axhspan(env.target * um - tol, env.target * um + tol, color="k", alpha=0.1)
+    ax2.set_xlabel("t [ms]")
+    ax2.set_ylabel("x* [nm]")
+    ax2.legend(loc="lower right")
+    fig.tight_layout()
+    fig.canvas.draw()
+    buf = np.asarray(fig.canvas.buffer_rgba())
+    return np.ascontiguousarray(buf[:, :, :3], dtype=np.uint8)
+
+
+def show(frame: np.ndarray) -> None:
+    import matplotlib.pyplot as plt
+    if "win" not in _FIG:
+        plt.ion()
+        _FIG["win"] = plt.figure("RollingDrive-v0")
+        _FIG["img"] = _FIG["win"].add_subplot(111).imshow(frame)
+        _FIG["win"].axes[0].axis("off")
+    else:
+        _FIG["img"].set_data(frame)
+    _FIG["win"].canvas.draw_idle()
+    plt.pause(0.001)
+
+
+def close() -> None:
+    if "win" in _FIG:
+        import matplotlib.pyplot as plt
+        plt.close(_FIG.pop("win"))
+        _FIG.pop("img", None)

@@ -1,0 +1,180 @@
+"""Scenes: YAML files in ``configs/scenes/`` that fix the physics and the task of RollingDrive-v0.
+
+Every key is required (a scene is a complete, explicit description), values in SI units.
+Unknown keys, missing keys, wrong types and out-of-range values are rejected with a message
+that names the key and its allowed range; keyword overrides (``gym.make(..., mu=0.1)``)
+follow the same checks.  ``.inf`` (YAML) or the string ``"inf"`` means infinity where allowed.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from .validation import check_range
+
+SCENE_DIR = Path(__file__).resolve().parent.parent / "configs" / "scenes"
+_INF = math.inf
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A complete scene (all SI).  See ``configs/scenes/default.yaml`` for a commented example."""
+
+    name: str
+    description: str
+    # contact physics
+    R: float                 # sphere radius [m]
+    E_star: float            # effective Young modulus [Pa]
+    G_star: float            # effective shear modulus [Pa]
+    mu: float                # Coulomb friction coefficient [-] (inf: no slip)
+    runner_mass: float       # [kg] (0: massless runner)
+    F_ext: float             # constant load on the runner [N] (positive along +x)
+    # actuators
+    N_min: float             # smallest normal force the action can ask for [N]
+    N_max: float             # largest normal force [N]
+    omega_R_max: float       # largest rolling rate |omega R| [m/s]
+    creep_max: float         # largest |1 - v/(omega R)| the action can ask for [-]
+    stroke_roll: float       # rolling travel limit: |integral omega R dt| <= stroke_roll [m]
+    stroke_translate: float  # translation travel limit: |integral v dt| <= stroke_translate [m]
+    # numerics and timing
+    period: float            # nominal excitation period tau [s] (time scale of the task)
+    ticks_per_period: int    # control ticks per nominal period
+    sub_steps: int           # physics sub-steps per control tick
+    resolution: float        # cells per contact radius at N_max
+    # task
+    episode_steps: int       # control ticks per episode (registration's max_episode_steps)
+    target_min: float        # smallest |target displacement| sampled at reset [m]
+    target_max: float        # largest |target displacement| [m]
+    target_both_signs: bool  # sample the target's sign too
+    tolerance: float         # |error| counted as "at the target" [m]
+    w_track: float           # weight of the tracking term (per tick, on |error|/target_max)
+    w_wear: float            # weight of the wear term (per tick, on slip work / wear_ref)
+
+    @property
+    def dt(self) -> float:
+        """Control tick [s]."""
+        return self.period / self.ticks_per_period
+
+    def replace(self, **overrides) -> "Scene":
+        return validate(dataclasses.replace(self, **_coerce_all(overrides)))
+
+
+_SPEC = {  # key: (type, lo, hi, lo_open, allow_inf)
+    "R": (float, 0.0, 1.0, True, False),
+    "E_star": (float, 0.0, 1e13, True, False),
+    "G_star": (float, 0.0, 1e13, True, False),
+    "mu": (float, 0.0, _INF, True, True),
+    "runner_mass": (float, 0.0, 1e6, False, False),
+    "F_ext": (float, -1e6, 1e6, False, False),
+    "N_min": (float, 0.0, 1e6, False, False),
+    "N_max": (float, 0.0, 1e6, True, False),
+    "omega_R_max": (float, 0.0, 1e3, True, False),
+    "creep_max": (float, 0.0, 2.0, True, False),
+    "stroke_roll": (float, 0.0, 1.0, True, False),
+    "stroke_translate": (float, 0.0, 1.0, True, False),
+    "period": (float, 0.0, 1e3, True, False),
+    "ticks_per_period": (int, 2, 10000, False, False),
+    "sub_steps": (int, 1, 100000, False, False),
+    "resolution": (float, 1.0, 4096.0, False, False),
+    "episode_steps": (int, 1, 10**8, False, False),
+    "target_min": (float, 0.0, 1.0, False, False),
+    "target_max": (float, 0.0, 1.0, True, False),
+    "target_both_signs": (bool, None, None, False, False),
+    "tolerance": (float, 0.0, 1.0, True, False),
+    "w_track": (float, 0.0, 1e6, False, False),
+    "w_wear": (float, 0.0, 1e12, False, False),
+}
+_FIELDS = [f.name for f in dataclasses.fields(Scene)]
+
+
+def _coerce(key, value):
+    if key in ("name", "description"):
+        if not isinstance(value, str):
+            raise ValueError(f"scene key '{key}' must be a string, got {type(value).__name__}")
+        return value
+    if key not in _SPEC:
+        raise ValueError(f"unknown scene key '{key}'; allowed keys: {', '.join(_FIELDS)}")
+    typ, lo, hi, lo_open, allow_inf = _SPEC[key]
+    if typ is bool:
+        if not isinstance(value, bool):
+            raise ValueError(f"scene key '{key}' must be true or false, got {value!r}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        raise ValueError(f"scene key '{key}' must be a number, got {value!r}")
+    if isinstance(value, str):
+        if value.strip().lower() in ("inf", ".inf", "infinity") and allow_inf:
+            value = _INF
+        else:
+            try:
+                value = float(value)
+            except ValueError:
+                raise ValueError(f"scene key '{key}' must be a number, got {value!r}") from None
+    if typ is int:
+        fv = float(value)
+        if not math.isfinite(fv) or fv != int(fv):
+            raise ValueError(f"scene key '{key}' must be an integer in [{lo}, {hi}], got {value!r}")
+        value = int(value)
+    x = check_range(f"scene key '{key}'", value, lo, hi, lo_open=lo_open, allow_inf=allow_inf)
+    return typ(x) if typ is int else x
+
+
+def _coerce_all(d: dict) -> dict:
+    return {k: _coerce(k, v) for k, v in d.items()}
+
+
+def validate(scene: Scene) -> Scene:
+    """Cross-key checks (single keys are checked on construction)."""
+    s = scene
+    if s.N_min >= s.N_max:
+        raise ValueError(f"scene key 'N_min' must be < N_max = {s.N_max}, got {s.N_min}")
+    if s.target_min > s.target_max:
+        raise ValueError(f"scene key 'target_min' must be <= target_max = {s.target_max}, "
+                         f"got {s.target_min}")
+    if s.runner_mass == 0.0 and s.F_ext != 0.0:
+        raise ValueError("scene key 'F_ext' must be 0 when runner_mass is 0 (a loaded massless "
+                         "runner has no equilibrium once the contact slides)")
+    a_max = math.sqrt(s.R * (3 * s.N_max / (4 * s.E_star * math.sqrt(s.R))) ** (2 / 3))
+    if a_max > 0.5 * s.R:
+        raise ValueError(f"scene key 'N_max' gives a contact radius {a_max:.3g} m > R/2: outside "
+                         "the small-strain contact theory")
+    return s
+
+
+def load_scene(scene: str | os.PathLike | dict | Scene = "default", **overrides) -> Scene:
+    """Load a scene by name (``configs/scenes/<name>.yaml``), path, dict or Scene, then apply
+    keyword overrides.  Every field is required in the file."""
+    if isinstance(scene, Scene):
+        return scene.replace(**overrides) if overrides else scene
+    if isinstance(scene, dict):
+        raw = dict(scene)
+        src = "<dict>"
+    else:
+        path = Path(scene)
+        if path.suffix not in (".yaml", ".yml"):
+            path = SCENE_DIR / f"{scene}.yaml"
+            if not path.exists():
+                raise ValueError(f"unknown scene {scene!r}; shipped scenes: "
+                                 f"{', '.join(list_scenes())} (or give a path to a .yaml file)")
+        if not path.exists():
+            raise ValueError(f"scene file {str(path)!r} does not exist")
+        with open(path) as f:
+            raw = yaml.safe_load(f)
+        if not isinstance(raw, dict):
+            raise ValueError(f"scene file {str(path)!r} must hold a mapping of keys to values")
+        raw.setdefault("name", path.stem)
+        src = str(path)
+    missing = [k for k in _FIELDS if k not in raw]
+    if missing:
+        raise ValueError(f"scene {src} is missing key(s): {', '.join(missing)}")
+    vals = _coerce_all(raw)
+    vals.update(_coerce_all(overrides))
+    return validate(Scene(**vals))
+
+
+def list_scenes() -> list[str]:
+    return sorted(p.stem for p in SCENE_DIR.glob("*.yaml"))

@@ -1,0 +1,35 @@
+"""Input checks shared by the model, the scenes, the env and the CLI: one message style."""
+from __future__ import annotations
+
+import math
+
+
+def check_range(name: str, value, lo: float, hi: float, *, lo_open: bool = False,
+                hi_open: bool = False, allow_inf: bool = False) -> float:
+    """Return ``float(value)`` or raise ValueError naming ``name`` and the allowed range.
+
+    NaN is always rejected; +inf only with ``allow_inf``.
+    """
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    lb = "(" if lo_open else "["
+    rb = ")" if hi_open else "]"
+    rng = f"{lb}{_fmt(lo)}, {_fmt(hi)}{rb}"
+    if math.isnan(x):
+        raise ValueError(f"{name} must be in {rng}, got NaN")
+    if math.isinf(x) and x > 0 and allow_inf:
+        return x
+    bad = (x < lo or x > hi or (lo_open and x == lo) or (hi_open and x == hi)
+           or (math.isinf(x) and not allow_inf))
+    if bad:
+        extra = " or inf" if allow_inf else ""
+        raise ValueError(f"{name} must be in {rng}{extra}, got {x!r}")
+    return x
+
+
+def _fmt(v: float) -> str:
+    if math.isinf(v):
+        return "inf" if v > 0 else "-inf"
+    return f"{v:g}"
