@@ -362,24 +362,26 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
                 if mass == 0.0 and SL <= abs(F) and (SL > 0.0 or F != 0.0):
                     st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_SLIDE
                 vv = min(max(v0, v_lo), v_hi)
-                scale = mass * (abs(v_lo) + abs(v_hi)) + dt * (SL + abs(F)) + 1e-300
                 for _it in range(200):
                     st[ST_ITER] += 1.0
                     s = s0 - vv
                     Tt = 0.0
+                    Ta = 0.0
                     dT = 0.0
                     for i in range(i0, i1 + 1):
                         Ut = A[i] + B[i] * s
                         Li = L[i]
                         if Ut > Li:
-                            Tt += Li
+                            Ut = Li
                         elif Ut < -Li:
-                            Tt -= Li
+                            Ut = -Li
                         else:
-                            Tt += Ut
                             dT += B[i]
+                        Tt += Ut
+                        Ta += abs(Ut)
                     g = mass * (vv - v0) - dt * (Tt + F)
-                    if abs(g) <= 1e-14 * scale:
+                    # g is piecewise linear: converged when it vanishes to round-off of its terms
+                    if abs(g) <= 1e-13 * (mass * (abs(vv) + abs(v0)) + dt * (Ta + abs(F))) + 1e-300:
                         break
                     if g > 0.0:
                         v_hi = vv
@@ -397,6 +399,7 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
         # ---------------------------------------------------------------- commit
         T1 = 0.0
         slip = 0.0
+        clipped = False
         for i in range(i0, i1 + 1):
             Ut = A[i] + B[i] * s
             if mu is not None:
@@ -407,18 +410,20 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
                     if ell > 0.0:
                         slip += Li * (Ut - Li) / ell
                     Ut = Li
+                    clipped = True
                 elif Ut < -Li:
                     xL = x_lo + i * dx
                     ell = _overlap(xL, xL + dx, c1, a)
                     if ell > 0.0:
                         slip += Li * (-Li - Ut) / ell
                     Ut = -Li
+                    clipped = True
             U[i] = Ut
             T1 += Ut
-        if mu is None:
-            imp = SIA + SIB * s  # exact integral of T over the sub-step
+        if clipped:
+            imp = 0.5 * (T0 + T1) * dt  # some cells slid: trapezoid on the clipped force
         else:
-            imp = 0.5 * (T0 + T1) * dt  # clipped force: trapezoid (first order in dt)
+            imp = SIA + SIB * s  # no slip: exact integral of T over the sub-step
         st[ST_C] = c1
         st[ST_VS] = v1
         st[ST_XS] += v1 * dt
@@ -504,3 +509,23 @@ def elastic_energy(U, st, p):
         if ell > 0.0:
             e += 0.5 * U[i] * U[i] / ell
     return e
+
+
+@njit(cache=True)
+def normal_force_sum(st, p, n):
+    """Sum over the cells of E*/G* times the exact integral of uN (normal force, G* = 1 units):
+    the discrete normal force that the friction limits use."""
+    c = st[ST_C]
+    a = st[ST_A]
+    d = st[ST_D]
+    x_lo = p[P_X_LO]
+    dx = p[P_DX]
+    if a <= 0.0:
+        return 0.0
+    i0 = max(int(math.floor((c - a - x_lo) / dx)), 0)
+    i1 = min(int(math.floor((c + a - x_lo) / dx)), n - 1)
+    total = 0.0
+    for i in range(i0, i1 + 1):
+        xL = x_lo + i * dx
+        total += _normal_content(xL, xL + dx, c, a, d, p[P_R])
+    return p[P_E_OVER_G] * total

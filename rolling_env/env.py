@@ -254,4 +254,4 @@ def _travel_factor(pos: float, step: float, limit: float) -> float:
     if abs(new) <= limit or step == 0.0:
         return 1.0
     room = (math.copysign(limit, step) - pos) / step
-    return min(max(room, 0.0), 1.0)
+    return float(min(max(room, 0.0), 1.0)) if room > 1e-12 else 0.0

@@ -95,7 +95,7 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
         "simulated": float(sim),
         "eq32": eq32,
         "eq29": float(analytic.eq29(delta, eps)),
-        "rel_error": (abs(sim - eq32) / abs(eq32) if eq32 not in (None, 0.0) else None),
+        "rel_error": (float(abs(sim - eq32) / abs(eq32)) if eq32 not in (None, 0.0) else None),
         "seconds": seconds,
         "delta": delta, "eps": eps, "w": w, "resolution": resolution,
     }

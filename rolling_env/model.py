@@ -72,9 +72,10 @@ class Grid:
         check_range("dx", self.dx, 0.0, _INF, lo_open=True, hi_open=True)
         if not (self.c_max >= self.c_min):
             raise ValueError(f"stroke must satisfy c_min <= c_max, got [{self.c_min}, {self.c_max}]")
-        margin = self.a_max + 2.0 * self.dx
-        self.x_lo = self.c_min - margin
-        self.n = int(math.ceil((self.c_max + margin - self.x_lo) / self.dx)) + 1
+        # a whole number of cells, centred on the stroke: mirrored strokes give mirrored grids
+        width = self.c_max - self.c_min + 2.0 * (self.a_max + 2.0 * self.dx)
+        self.n = int(math.ceil(width / self.dx))
+        self.x_lo = 0.5 * (self.c_min + self.c_max) - 0.5 * self.n * self.dx
 
 
 class Drive:
@@ -238,6 +239,10 @@ class Drive:
         else:  # prescribed runner: its work is supplied by whatever prescribes it
             e["residual"] = e["drive"] - e["runner"] - (e["elastic"] + e["release"] + e["slip"])
         return e
+
+    def normal_force(self) -> float:
+        """Discrete normal force [N]: sum over cells of E* times the exact integral of uN."""
+        return float(K.normal_force_sum(self.st, self._p, self.grid.n)) * self.F0
 
     @property
     def c(self) -> float:

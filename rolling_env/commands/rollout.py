@@ -1,0 +1,47 @@
+"""Subcommand rollout: one episode of a controller in a scene -> CSV + PNG (+ optional frame)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..cli import emit, positive_int
+
+
+def register(sub):
+    p = sub.add_parser("rollout", help="roll out a controller in a scene, write CSV and a plot",
+                       description="Run one episode of RollingDrive-v0 with a controller and "
+                       "write the trajectory to CSV and a PNG plot.")
+    p.add_argument("--scene", default="default", help="scene name or YAML path (default: default)")
+    p.add_argument("--controller", default="eq32-feedback",
+                   help="random | zero | eq32 | eq32-feedback | path/to/model.zip")
+    p.add_argument("--seed", type=positive_int("seed", 0, 2**31 - 1), default=0)
+    p.add_argument("--target", type=float, default=None, help="target displacement [m] "
+                   "(default: drawn from the scene's range with the seed)")
+    p.add_argument("--out", default="results/rollouts", help="output folder")
+    p.add_argument("--frame", action="store_true", help="also save the final rendered frame")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_run)
+
+
+def _run(args):
+    import rolling_env
+    from ..rollout import make_controller, plot, rollout, write_csv
+
+    env = rolling_env.make(args.scene, render_mode="rgb_array" if args.frame else None)
+    ctrl = make_controller(args.controller, env, seed=args.seed)
+    data = rollout(env, ctrl, seed=args.seed, target=args.target)
+    stem = f"{env.unwrapped.scene.name}_{Path(args.controller).stem}_seed{args.seed}"
+    out = Path(args.out)
+    csv_path = write_csv(data, out / f"{stem}.csv")
+    png_path = plot(data, out / f"{stem}.png",
+                    title=f"{env.unwrapped.scene.name}: {args.controller}")
+    res = {"csv": str(csv_path), "png": str(png_path), "return": data["return"],
+           "final_error": data["final_error"], "target": float(data["target"][-1]),
+           "slip_work": data["total_slip_work"], "steps": int(data["step"][-1])}
+    if args.frame:
+        import matplotlib.image
+        frame_path = out / f"{stem}_frame.png"
+        matplotlib.image.imsave(frame_path, env.render())
+        res["frame"] = str(frame_path)
+    env.close()
+    emit(res, args.json, "\n".join(f"{k}: {v}" for k, v in res.items()))
+    return 0

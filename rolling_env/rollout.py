@@ -1,0 +1,139 @@
+"""Roll out a controller in a scene and keep the trajectory (CSV + plot).
+
+A controller is anything with SB3's ``predict(obs, state=None, episode_start=None,
+deterministic=True) -> (action, state)``: a trained SB3 model, the baselines in ``agents``, or
+the two trivial ones here.
+"""
+from __future__ import annotations
+
+import csv
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+COLUMNS = ("step", "t", "target", "xstar", "vstar", "error", "N", "T", "omega_R", "v",
+           "stick_fraction", "slip_work", "reward", "reward_track", "reward_wear", "saturated",
+           "a_force", "a_roll", "a_creep")
+
+
+class RandomController:
+    """Uniform random actions from the env's action space (seeded)."""
+
+    def __init__(self, action_space, seed=None):
+        self.space = action_space
+        self.space.seed(seed)
+
+    def predict(self, obs, state=None, episode_start=None, deterministic=True):
+        return self.space.sample(), state
+
+
+class ZeroController:
+    """Always the zero action: mid force, no rolling, no creep."""
+
+    def predict(self, obs, state=None, episode_start=None, deterministic=True):
+        return np.zeros(3, np.float32), state
+
+
+def rollout(env, controller, *, seed=0, target=None, max_steps=None) -> dict:
+    """Run one episode; returns per-step arrays (keys ``COLUMNS``) and the episode's totals."""
+    options = None if target is None else {"target": float(target)}
+    obs, info = env.reset(seed=seed, options=options)
+    rows = []
+    state = None
+    start = True
+    dt = env.unwrapped.dt
+    k = 0
+    while True:
+        action, state = controller.predict(obs, state=state, episode_start=np.array([start]),
+                                           deterministic=True)
+        action = np.asarray(action, dtype=np.float32).reshape(3)
+        start = False
+        obs, reward, terminated, truncated, info = env.step(action)
+        k += 1
+        rows.append((k, k * dt, info["target"], info["xstar"], info["vstar"], info["error"],
+                     info["N"], info["T"], info["omega_R"], info["v"], info["stick_fraction"],
+                     info["slip_work"], reward, info["reward_track"], info["reward_wear"],
+                     float(info["saturated"]), *action.tolist()))
+        if terminated or truncated or (max_steps is not None and k >= max_steps):
+            break
+    data = {c: np.array([r[i] for r in rows]) for i, c in enumerate(COLUMNS)}
+    data["return"] = float(data["reward"].sum())
+    data["final_error"] = float(data["error"][-1])
+    data["total_slip_work"] = float(data["slip_work"].sum())
+    return data
+
+
+def write_csv(data: dict, path: str | os.PathLike) -> Path:
+    """Write the per-step columns atomically (temp file + rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(COLUMNS)
+            for i in range(len(data["step"])):
+                w.writerow([repr(float(data[c][i])) for c in COLUMNS])
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+    return path
+
+
+def plot(data: dict, path: str | os.PathLike, title: str = "") -> Path:
+    """Runner against target, forces, and actions over the episode (PNG, written atomically)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    t = data["t"] * 1e3
+    fig, ax = plt.subplots(3, 1, figsize=(7, 7), sharex=True)
+    ax[0].plot(t, data["xstar"] * 1e9, label="runner x*")
+    ax[0].plot(t, data["target"] * 1e9, "k--", label="target")
+    ax[0].set_ylabel("displacement [nm]")
+    ax[0].legend()
+    ax[0].set_title(title)
+    ax[1].plot(t, data["N"], label="N [N]")
+    ax[1].plot(t, data["T"], label="T [N]")
+    ax[1].set_ylabel("force [N]")
+    ax[1].legend()
+    for c in ("a_force", "a_roll", "a_creep"):
+        ax[2].plot(t, data[c], label=c, lw=0.8)
+    ax[2].set_ylabel("action")
+    ax[2].set_xlabel("t [ms]")
+    ax[2].legend(ncol=3)
+    fig.tight_layout()
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".png")
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=100)
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+    finally:
+        plt.close(fig)
+    return path
+
+
+def make_controller(name: str, env, seed=0):
+    """``random``, ``zero``, ``eq32``, ``eq32-feedback`` or a path to an SB3 model .zip
+    (trained by ``agents.train``; its VecNormalize statistics are applied if present)."""
+    if name == "random":
+        return RandomController(env.action_space, seed)
+    if name == "zero":
+        return ZeroController()
+    if name in ("eq32", "eq32-feedback"):
+        from agents import baselines
+        cls = baselines.Eq32OpenLoop if name == "eq32" else baselines.Eq32Feedback
+        return cls.from_env(env)
+    if name.endswith(".zip") and Path(name).exists():
+        from agents.evaluate import load_agent
+        return load_agent(name, env)
+    raise ValueError(f"controller must be random, zero, eq32, eq32-feedback or an existing "
+                     f"model .zip, got {name!r}")

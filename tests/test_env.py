@@ -1,0 +1,212 @@
+"""RollingDrive-v0 checked like Gymnasium's own envs (tests/envs/test_envs.py)."""
+from __future__ import annotations
+
+import pickle
+import subprocess
+import sys
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import yaml
+
+import rolling_env
+from rolling_env.scenes import SCENE_DIR, load_scene
+
+SCENES = rolling_env.list_scenes()
+
+
+def test_shipped_scenes():
+    assert set(SCENES) >= {"default", "heavy_inf_friction", "resonant", "light_stiff", "loaded"}
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_gymnasium_check_env_no_warnings(scene):
+    from gymnasium.utils.env_checker import check_env
+    env = gym.make("RollingDrive-v0", scene=scene)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env.unwrapped, skip_render_check=True)
+    msgs = [str(w.message) for w in caught]
+    assert not msgs, f"gymnasium check_env warned on {scene}: {msgs}"
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_sb3_check_env_no_warnings(scene):
+    from stable_baselines3.common.env_checker import check_env
+    env = gym.make("RollingDrive-v0", scene=scene).unwrapped
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env, warn=True)
+    msgs = [str(w.message) for w in caught]
+    assert not msgs, f"SB3 check_env warned on {scene}: {msgs}"
+
+
+def _rollout(env, seed, n=300):
+    obs, _ = env.reset(seed=seed)
+    env.action_space.seed(seed)
+    traj = [obs]
+    for _ in range(n):
+        obs, r, term, trunc, info = env.step(env.action_space.sample())
+        traj.append(np.concatenate([obs, [r, info["xstar"], info["T"]]]))
+        if term or trunc:
+            obs, _ = env.reset()
+    return traj
+
+
+@pytest.mark.parametrize("scene", ["default", "resonant"])
+def test_same_seed_bit_identical(scene):
+    a = _rollout(gym.make("RollingDrive-v0", scene=scene), 123)
+    b = _rollout(gym.make("RollingDrive-v0", scene=scene), 123)
+    for x, y in zip(a, b):
+        assert np.array_equal(x, y), "two envs with one seed must give bit-identical rollouts"
+
+
+def test_pickle_round_trip_continues_identically():
+    env = gym.make("RollingDrive-v0")
+    env.reset(seed=5)
+    rng = np.random.default_rng(0)
+    acts = rng.uniform(-1, 1, (60, 3)).astype(np.float32)
+    for a in acts[:30]:
+        env.step(a)
+    clone = pickle.loads(pickle.dumps(env))
+    for a in acts[30:]:
+        o1, r1, *_ = env.step(a)
+        o2, r2, *_ = clone.step(a)
+        assert np.array_equal(o1, o2) and r1 == r2, "pickled env diverged from the original"
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_reward_is_exact_sum_of_terms(scene):
+    env = gym.make("RollingDrive-v0", scene=scene)
+    env.reset(seed=1)
+    env.action_space.seed(1)
+    for _ in range(200):
+        _, r, _, _, info = env.step(env.action_space.sample())
+        assert r == info["reward_track"] + info["reward_wear"], "reward != sum of its info terms"
+        assert info["reward_wear"] <= 0.0 and info["reward_track"] <= 0.0
+
+
+def test_truncation_from_registration_and_reset_after():
+    env = gym.make("RollingDrive-v0", max_episode_steps=7)
+    env.reset(seed=0)
+    flags = [env.step(np.zeros(3, np.float32))[3] for _ in range(7)]
+    assert flags == [False] * 6 + [True], f"TimeLimit must truncate at step 7: {flags}"
+    obs, _ = env.reset()
+    assert obs[9] == 0.0, "time fraction restarts at 0 after reset"
+    _, _, term, trunc, _ = env.step(np.zeros(3, np.float32))
+    assert not term and not trunc
+    assert gym.spec("RollingDrive-v0").max_episode_steps == rolling_env.DEFAULT_EPISODE_STEPS
+
+
+def test_make_uses_scene_episode_steps():
+    env = rolling_env.make("default", episode_steps=11)
+    assert env.spec.max_episode_steps == 11
+
+
+def test_target_option_and_sampled_range():
+    env = gym.make("RollingDrive-v0")
+    _, info = env.reset(seed=0, options={"target": 3e-7})
+    assert info["target"] == 3e-7
+    sc = load_scene("default")
+    for s in range(20):
+        _, info = env.reset(seed=s)
+        assert sc.target_min <= abs(info["target"]) <= sc.target_max
+    with pytest.raises(ValueError, match="target"):
+        env.reset(options={"target": float("nan")})
+
+
+@pytest.mark.parametrize("bad", [np.array([np.nan, 0, 0]), np.array([0, np.inf, 0]),
+                                 np.zeros(2), np.zeros((3, 1)), np.array([1.5, 0, 0])])
+def test_bad_actions_raise(bad):
+    env = gym.make("RollingDrive-v0").unwrapped
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="action"):
+        env.step(bad)
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_random_fuzz_stays_finite(scene):
+    """Thousands of random (and extreme corner) actions: every observation, reward and state
+    stays finite and inside the observation bounds."""
+    env = gym.make("RollingDrive-v0", scene=scene)
+    env.reset(seed=7)
+    rng = np.random.default_rng(7)
+    corners = np.array([[1, 1, 1], [-1, -1, -1], [1, -1, 1], [-1, 1, -1]], np.float32)
+    for k in range(3000):
+        a = corners[k % 4] if (k // 50) % 3 == 0 else rng.uniform(-1, 1, 3).astype(np.float32)
+        obs, r, term, trunc, info = env.step(a)
+        assert np.all(np.isfinite(obs)) and np.isfinite(r), f"non-finite at step {k}"
+        assert env.observation_space.contains(obs), f"obs out of bounds at step {k}"
+        if trunc:
+            env.reset()
+    drv = env.unwrapped.drive
+    assert np.all(np.isfinite(drv.U)) and np.all(np.isfinite(drv.st))
+
+
+def test_stroke_saturation_reported():
+    env = gym.make("RollingDrive-v0").unwrapped
+    env.reset(seed=0)
+    sat = []
+    for _ in range(40):  # roll one way at full rate: the stroke limit must stop the patch
+        _, _, _, _, info = env.step(np.array([0.5, 1.0, 0.2], np.float32))
+        sat.append(info["saturation"])
+        assert abs(env.drive.c) <= env.scene.stroke_roll * (1 + 1e-12)
+    assert sat[0] == 1.0 and sat[-1] == 0.0 and any(0 < s < 1 for s in sat), sat
+
+
+def test_render_rgb_array():
+    env = gym.make("RollingDrive-v0", render_mode="rgb_array")
+    env.reset(seed=0)
+    for _ in range(5):
+        env.step(np.array([0.5, 0.5, 0.5], np.float32))
+    frame = env.render()
+    assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
+    assert frame.std() > 5, "frame should not be blank"
+
+
+# ----------------------------------------------------------------------------- scenes
+def _raw(name="default"):
+    with open(SCENE_DIR / f"{name}.yaml") as f:
+        return yaml.safe_load(f)
+
+
+@pytest.mark.parametrize("mutate,match", [
+    (lambda d: d.update(bogus=1), "unknown scene key 'bogus'"),
+    (lambda d: d.pop("mu"), "missing key"),
+    (lambda d: d.update(mu="lots"), "'mu' must be a number"),
+    (lambda d: d.update(runner_mass=-1.0), "'runner_mass' must be in"),
+    (lambda d: d.update(sub_steps=2.5), "'sub_steps' must be an integer"),
+    (lambda d: d.update(target_both_signs="yes"), "'target_both_signs' must be true or false"),
+    (lambda d: d.update(N_min=2.0), "'N_min' must be < N_max"),
+])
+def test_scene_validation(mutate, match):
+    d = _raw()
+    mutate(d)
+    with pytest.raises(ValueError, match=match):
+        load_scene(d)
+
+
+def test_overrides_validated_and_applied():
+    env = gym.make("RollingDrive-v0", mu=0.1, runner_mass=0.01)
+    assert env.unwrapped.scene.mu == 0.1 and env.unwrapped.scene.runner_mass == 0.01
+    with pytest.raises(ValueError, match="'mu' must be in"):
+        gym.make("RollingDrive-v0", mu=-1.0)
+    with pytest.raises(ValueError, match="unknown scene"):
+        gym.make("RollingDrive-v0", scene="nope")
+
+
+def test_scene_features_pick_the_kernel():
+    """Leaving out: infinite friction keeps no friction-limit array, no load keeps no load term."""
+    inf = gym.make("RollingDrive-v0", scene="heavy_inf_friction").unwrapped.drive
+    loaded = gym.make("RollingDrive-v0", scene="loaded").unwrapped.drive
+    assert inf._mu is None and inf.L.size == 1 and inf._load is None
+    assert loaded._mu is not None and loaded._load is not None
+
+
+def test_registration_without_import():
+    code = ("import gymnasium as gym; env = gym.make('rolling_env:RollingDrive-v0'); "
+            "env.reset(seed=0); print(env.step(env.action_space.sample())[0].shape)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "(13,)", out.stderr

@@ -1,0 +1,215 @@
+"""Physics core against the analytic results (tiered tolerances, ContactMechanics style).
+
+Tolerances: 1e-10 where the discretisation is exact (normal force, linearity, mirror),
+1e-3 for discretisation-limited quantities at the default resolution, looser where the
+physics itself (start-up transients, resonance) sets the error; each assert says why.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rolling_env import analytic
+from rolling_env import experiments as ex
+from rolling_env.excitation import SquareWave
+from rolling_env.model import Drive, DriveParams
+
+GEO = ex.Geometry()
+
+
+def _drive(params=None, resolution=32, stroke=(0.0, 0.0), a_max=None):
+    params = params or DriveParams(GEO.R, GEO.E_star, GEO.G_star)
+    return Drive(params, a_ref=GEO.a1, resolution=resolution, stroke=stroke,
+                 a_max=a_max or GEO.a1, t_ref=GEO.tau)
+
+
+# ----------------------------------------------------------------------------- normal contact
+@pytest.mark.parametrize("resolution", [3, 7, 16, 33, 100])
+@pytest.mark.parametrize("N", [0.05, 0.4, 1.0])
+def test_hertz_normal_force_exact_on_any_grid(resolution, N):
+    """Cells integrate uN exactly over their overlap with the contact: Eq. 2 to round-off,
+    wherever the contact edges fall (odd resolutions, off-centre patch)."""
+    drv = _drive(resolution=resolution, stroke=(-3 * GEO.a1, 3 * GEO.a1), a_max=3 * GEO.a1)
+    drv.reset(c0=0.37 * GEO.a1)
+    drv.run(dt_tick=1e-6, n_sub=1, omega_R=0.0, v=0.0, N=N, vstar=0.0)
+    got = drv.normal_force()
+    assert abs(got - N) <= 1e-10 * N, f"discrete normal force {got} vs Hertz {N} (res {resolution})"
+
+
+# ----------------------------------------------------------------------------- Cattaneo-Mindlin
+@pytest.mark.parametrize("mu", [0.05, 0.2, 0.6])
+def test_cattaneo_mindlin_curve(mu):
+    """Tangential loading of a pressed sphere follows T = mu N [1 - (1 - u/u*)^1.5] (MDR is exact
+    in the continuum); max error 2e-3 of mu N at the default resolution."""
+    r = ex.mindlin(mu, points=41)
+    err = np.max(np.abs(np.array(r["T_over_muN"]) - np.array(r["analytic"])))
+    assert err < 2e-3, f"Mindlin curve max |T/(mu N) error| {err:.2e} for mu = {mu}"
+    assert abs(r["T_over_muN"][-1] - 1.0) < 1e-9, "beyond u* the whole contact slides: T = mu N"
+
+
+def test_mindlin_converges_with_resolution():
+    errs = []
+    for res in (8, 32, 128):
+        r = ex.mindlin(0.3, points=41, resolution=res)
+        errs.append(np.max(np.abs(np.array(r["T_over_muN"]) - np.array(r["analytic"]))))
+    assert errs[0] > errs[1] > errs[2], f"Mindlin error must fall with resolution: {errs}"
+
+
+# ----------------------------------------------------------------------------- working points
+CASES = [(0.93, 0.2, 2.2), (0.7, 0.1, 2.5), (0.5, 0.3, 5.0), (0.2, -0.3, 3.0),
+         (0.85, 0.6, 10.0), (0.4, 0.0, 2.0)]
+
+
+@pytest.mark.parametrize("delta,eps,w", CASES)
+def test_working_point_matches_eq32(delta, eps, w):
+    """Zero-impulse working point vs Eq. 32: rel. error < 1e-3 at the default resolution."""
+    r = ex.working_point(delta, eps, w)
+    assert r["rel_error"] < 1e-3, (f"working point {r['simulated']:.6f} vs Eq. 32 "
+                                   f"{r['eq32']:.6f} (rel {r['rel_error']:.2e}) at {delta, eps, w}")
+
+
+def test_working_point_tends_to_eq29_at_large_w():
+    """At w = 1000 Eq. 32 is within 0.13% of Eq. 29 (O(1/w)) and so is the simulation (3e-3)."""
+    r = ex.working_point(0.6, 0.2, 1000.0, resolution=16)
+    assert abs(r["simulated"] - r["eq29"]) / r["eq29"] < 3e-3, r
+
+
+@pytest.mark.parametrize("eps", [0.0, 0.3, 0.7])
+def test_force_sum_zero_line_is_eq29(eps):
+    """Steady force sum (paper Fig. 6) vanishes on Eq. 29 (delta 0.93, w 2.2); it is affine in
+    v*, so its zero follows from two evaluations.  Tolerance 1e-3 relative."""
+    f0 = ex.force_sum(0.93, eps, 2.2, 0.0)
+    f1 = ex.force_sum(0.93, eps, 2.2, 0.1)
+    zero = -0.1 * f0 / (f1 - f0)
+    ref = analytic.eq29(0.93, eps)
+    assert abs(zero - ref) < 1e-3 * abs(ref), f"force-sum zero {zero:.6f} vs Eq. 29 {ref:.6f}"
+
+
+def test_impulse_is_independent_of_substep_for_prescribed_runner():
+    """Entry/exit times inside a sub-step are exact: 1 or 40 sub-steps per half period agree
+    to 1e-10 (infinite friction, prescribed runner)."""
+    i1 = ex.period_impulse(0.7, 0.1, 2.5, 0.05, resolution=24, ticks_per_half=1, n_sub=1)
+    i2 = ex.period_impulse(0.7, 0.1, 2.5, 0.05, resolution=24, ticks_per_half=4, n_sub=10)
+    assert abs(i1 - i2) < 1e-10 * abs(i1), f"{i1} vs {i2}"
+
+
+@pytest.mark.parametrize("delta,eps,w", [(0.7, 0.1, 1.9), (0.5, 0.2, 1.75), (0.9, 0.3, 1.96)])
+def test_w_below_two_correction(delta, eps, w):
+    """For 1 + sqrt(delta) <= w < 2 the corrected working point (physics.md) holds (1e-3)."""
+    r = ex.working_point(delta, eps, w, resolution=128)
+    ref = analytic.working_point_ratio(delta, eps, w)
+    assert abs(r["simulated"] - ref) < 1e-3 * abs(ref), f"sim {r['simulated']} vs {ref}"
+
+
+# ----------------------------------------------------------------------------- runner dynamics
+def test_heavy_runner_tends_to_eq32():
+    """A heavy runner (omega_n/Omega = 0.02) started at the working velocity keeps it: mean
+    v* within 1% of Eq. 32 (infinite friction)."""
+    eq = analytic.eq32(0.7, 0.1, 2.5)
+    r = ex.simulate(0.7, 0.1, 2.5, 0.02, periods=20, vstar0_ratio=eq)
+    assert abs(r["mean_v_star_over_omega_R"] - eq) < 1e-2 * eq, r
+
+
+def test_infinite_mass_limit_is_working_point():
+    """r = 0 (infinite mass) finds the zero-impulse velocity: equal to working_point (1e-8)."""
+    r = ex.simulate(0.7, 0.1, 2.5, 0.0, periods=3)
+    wp = ex.working_point(0.7, 0.1, 2.5)
+    assert abs(r["mean_v_star_over_omega_R"] - wp["simulated"]) < 1e-8, (r, wp)
+
+
+@pytest.mark.parametrize("mu", [math.inf, 0.3])
+def test_massless_runner_has_no_net_motion(mu):
+    """A massless free runner follows the sphere: no net motion (|mean v*| < 1e-6 omega R)."""
+    r = ex.simulate(0.7, 0.995 if math.isfinite(mu) else 0.1, 2.5, math.inf, mu=mu, periods=10)
+    assert abs(r["mean_v_star_over_omega_R"]) < 1e-6, r
+
+
+def test_resonant_band_exceeds_quasi_static_and_stiff_runner_collapses():
+    """physics.md: mean velocity above Eq. 32 around omega_n/Omega ~ 0.5-1, nearly zero from ~2."""
+    eq = analytic.eq32(0.7, 0.1, 2.5)
+    res = ex.simulate(0.7, 0.1, 2.5, 0.7, periods=40)["mean_v_star_over_omega_R"]
+    stiff = ex.simulate(0.7, 0.1, 2.5, 5.0, periods=40)["mean_v_star_over_omega_R"]
+    assert res > 1.05 * eq, f"resonant band: {res} should exceed Eq. 32 {eq}"
+    assert abs(stiff) < 0.2 * eq, f"stiff runner: {stiff} should collapse below 0.2 x Eq. 32"
+
+
+@pytest.mark.parametrize("r,mu,eps", [(0.3, math.inf, 0.1), (1.0, math.inf, 0.1),
+                                      (0.3, 0.3, 0.995), (0.3, 0.1, 0.9)])
+def test_energy_is_not_created(r, mu, eps):
+    """Work in = kinetic + elastic + released + slip (+ numerical dissipation >= 0).
+    The residual (relative to the drive work) lies in [-2e-3, 5e-2]: discretisation-level,
+    and energy is never created beyond the 2e-3 time-discretisation error of slip."""
+    res = ex.simulate(0.7, eps, 2.5, r, mu=mu, periods=10)
+    assert -2e-3 < res["energy_residual"] < 5e-2, res
+
+
+def test_energy_residual_prescribed_runner_small():
+    wave = SquareWave(0.7, 0.1, 2.5, GEO.a1, GEO.R, GEO.tau)
+    drv = _drive(resolution=64, stroke=wave.stroke)
+    drv.reset()
+    d, u, v = wave.ticks(4, 4)
+    drv.run(dt_tick=wave.dt_tick(4), n_sub=3, omega_R=u, v=v, d=d, vstar=0.03 * wave.omega_R)
+    e = drv.energy
+    assert 0 <= e["residual"] < 5e-3 * e["drive"], e
+
+
+def test_mirror_symmetry():
+    """The mirrored excitation moves the runner the other way by the same amount (1e-9)."""
+    kw = dict(periods=12, mu=0.3)
+    a = ex.simulate(0.7, 0.995, 2.5, 0.3, direction=1, record=True, **kw)
+    b = ex.simulate(0.7, 0.995, 2.5, 0.3, direction=-1, record=True, **kw)
+    xa, xb = a["trajectory"]["xstar"], b["trajectory"]["xstar"]
+    assert np.max(np.abs(xa + xb)) < 1e-9 * np.max(np.abs(xa)), "mirror run is not the mirror image"
+    assert abs(a["slip_work"] - b["slip_work"]) <= 1e-9 * a["slip_work"]
+
+
+def test_zero_feature_equals_feature_off():
+    """A load of 0.0 passed to the kernel equals no load bit for bit; friction 1e12 equals
+    infinite friction to 1e-12 (the clip never triggers)."""
+    wave = SquareWave(0.7, 0.1, 2.5, GEO.a1, GEO.R, GEO.tau)
+    d, u, v = wave.ticks(4, 2)
+    outs = []
+    for mu, load in [(None, None), (None, 0.0), (1e12, None)]:
+        drv = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, m=1e-3), stroke=wave.stroke)
+        drv.reset()
+        drv._mu, drv._load = mu, load
+        drv.L = np.zeros(drv.grid.n)
+        outs.append(drv.run(dt_tick=wave.dt_tick(2), n_sub=20, omega_R=u, v=v, d=d)["xstar"])
+    assert np.array_equal(outs[0], outs[1]), "load 0.0 must equal no load exactly"
+    assert np.max(np.abs(outs[0] - outs[2])) < 1e-12 * np.max(np.abs(outs[0])) + 1e-300
+
+
+def test_lift_off_releases_everything():
+    wave = SquareWave(0.7, 0.1, 2.5, GEO.a1, GEO.R, GEO.tau)
+    drv = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=0.3, m=1e-3), stroke=wave.stroke)
+    drv.reset()
+    d, u, v = wave.ticks(1, 2)
+    drv.run(dt_tick=wave.dt_tick(2), n_sub=10, omega_R=u, v=v, d=d)
+    out = drv.run(dt_tick=wave.dt_tick(2), n_sub=10, omega_R=u[:1], v=v[:1], d=0.0)
+    assert out["T"][0] == 0.0 and np.all(drv.U == 0.0), "lift-off must release every spring"
+    assert np.isfinite(drv.vstar)
+
+
+# ----------------------------------------------------------------------------- bad input
+@pytest.mark.parametrize("kw,name", [(dict(R=-1.0), "R"), (dict(mu=-0.1), "mu"),
+                                     (dict(E_star=float("nan")), "E_star"), (dict(m=-1.0), "m")])
+def test_bad_params_rejected(kw, name):
+    base = dict(R=1e-3, E_star=1e11, G_star=8e10)
+    base.update(kw)
+    with pytest.raises(ValueError, match=name):
+        DriveParams(**base)
+
+
+@pytest.mark.parametrize("args,name", [((1.5, 0.1, 2.5), "delta"), ((0.7, 0.1, -1.0), "w"),
+                                       ((0.7, float("nan"), 2.5), "eps")])
+def test_bad_dimensionless_inputs_rejected(args, name):
+    with pytest.raises(ValueError, match=name):
+        ex.working_point(*args)
+
+
+def test_nan_input_rejected_by_drive():
+    drv = _drive()
+    with pytest.raises(ValueError, match="omega_R"):
+        drv.run(dt_tick=1e-6, n_sub=1, omega_R=float("nan"), v=0.0, N=0.1, vstar=0.0)
