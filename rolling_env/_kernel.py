@@ -54,7 +54,9 @@ ST_EXT = 12     # cumulative work of F_ext on the runner
 ST_TIME = 13    # time
 ST_FLAG = 14    # error flags (bit field, see FLAG_*)
 ST_ITER = 15    # cumulative Newton iterations (finite friction, free runner)
-N_STATE = 16
+ST_SNAP = 16    # cumulative elastic energy lost beyond the Coulomb work when springs snap to
+                # the lower friction limit of an instantaneous normal-load drop
+N_STATE = 17
 
 FLAG_GRID = 1       # the contact reached the end of the spring row
 FLAG_NONFINITE = 2  # a non-finite value appeared (kernel stopped)
@@ -219,36 +221,53 @@ def _walk(U0, xL, xR, c0, a, u, dt, res):
 
 
 @njit(cache=True)
-def _set_radius(U, st, p, a_new):
-    """Conservative remap when the contact half-width jumps from st[ST_A] to a_new.
+def _set_radius(U, st, p, a_new, d_new, mu):
+    """Instantaneous change of the indentation to d_new (contact half-width a_new).
 
-    Shrinking releases the cut-off part of each edge cell (uniform content), growing adds
-    material with zero deflection (content unchanged)."""
+    Shrinking releases the cut-off part of each edge cell (uniform content); growing adds
+    material with zero deflection (content unchanged).  With finite friction a load drop also
+    lowers every friction limit at once: springs above it snap to it, doing Coulomb work
+    (returned, and added to the slip work) and losing the rest of their excess elastic energy
+    (``ST_SNAP``)."""
     a_old = st[ST_A]
-    if a_new == a_old:
-        return
+    d_old = st[ST_D]
+    st[ST_A] = a_new
+    st[ST_D] = d_new
+    if a_new >= a_old and d_new >= d_old:
+        return 0.0
     c = st[ST_C]
     x_lo = p[P_X_LO]
     dx = p[P_DX]
     n = U.shape[0]
-    if a_new < a_old:
-        i0 = max(int(math.floor((c - a_old - x_lo) / dx)), 0)
-        i1 = min(int(math.floor((c + a_old - x_lo) / dx)), n - 1)
-        rel = 0.0
-        T = 0.0
-        for i in range(i0, i1 + 1):
-            xL = x_lo + i * dx
-            lo = _overlap(xL, xL + dx, c, a_old)
-            ln = _overlap(xL, xL + dx, c, a_new)
-            if lo > 0.0 and ln < lo:
-                Ui = U[i]
-                Un = Ui * ln / lo
-                rel += 0.5 * Ui * Ui / lo - (0.5 * Un * Un / ln if ln > 0.0 else 0.0)
-                U[i] = Un
-            T += U[i]
-        st[ST_REL] += rel
-        st[ST_T] = T
-    st[ST_A] = a_new
+    i0 = max(int(math.floor((c - a_old - x_lo) / dx)), 0)
+    i1 = min(int(math.floor((c + a_old - x_lo) / dx)), n - 1)
+    rel = 0.0
+    slip = 0.0
+    snap = 0.0
+    T = 0.0
+    for i in range(i0, i1 + 1):
+        xL = x_lo + i * dx
+        lo = _overlap(xL, xL + dx, c, a_old)
+        ln = _overlap(xL, xL + dx, c, a_new)
+        if lo > 0.0 and ln < lo:
+            Ui = U[i]
+            Un = Ui * ln / lo
+            rel += 0.5 * Ui * Ui / lo - (0.5 * Un * Un / ln if ln > 0.0 else 0.0)
+            U[i] = Un
+        if mu is not None and ln > 0.0:
+            Li = mu * p[P_E_OVER_G] * _normal_content(xL, xL + dx, c, a_new, d_new, p[P_R])
+            Ui = U[i]
+            if abs(Ui) > Li:
+                ex = abs(Ui) - Li
+                slip += Li * ex / ln
+                snap += 0.5 * ex * ex / ln
+                U[i] = Li if Ui > 0.0 else -Li
+        T += U[i]
+    st[ST_REL] += rel
+    st[ST_SLIP] += slip
+    st[ST_SNAP] += snap
+    st[ST_T] = T
+    return slip
 
 
 @njit(cache=True)
@@ -266,10 +285,8 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
     n = U.shape[0]
     res = np.empty(7)
     a = math.sqrt(R * d) if d > 0.0 else 0.0
-    _set_radius(U, st, p, a)
-    st[ST_D] = d
+    slip_tick = _set_radius(U, st, p, a, d, mu)
     s0 = u - v
-    slip_tick = 0.0
     imp_tick = 0.0
     for _ in range(n_sub):
         c0 = st[ST_C]

@@ -213,8 +213,11 @@ class Drive:
     def energy(self) -> dict:
         """Cumulative energy terms [J] and the balance residual.
 
-        drive = elastic + release + slip + runner_work, runner_work + ext = kinetic (+ numerical
-        dissipation of the implicit step).  ``residual`` = drive + ext - (elastic + release + slip
+        drive = elastic + release + slip + snap + runner_work, runner_work + ext = kinetic
+        (+ numerical dissipation of the implicit step).  ``slip`` is the Coulomb work (wear),
+        ``release`` the elastic energy of springs leaving the contact, ``snap`` the energy lost
+        beyond the Coulomb work when springs snap to a friction limit that dropped (a sudden
+        load drop; O(dt) otherwise).  ``residual`` = drive + ext - (elastic + release + slip
         + kinetic), i.e. energy lost to discretisation (positive) or created (negative).
         """
         st, W0 = self.st, self.W0
@@ -231,13 +234,14 @@ class Drive:
             "elastic": elastic,
             "release": st[K.ST_REL] * W0,
             "slip": st[K.ST_SLIP] * W0,
+            "snap": st[K.ST_SNAP] * W0,
             "kinetic": kin,
         }
+        lost = e["elastic"] + e["release"] + e["slip"] + e["snap"]
         if math.isfinite(m):
-            e["residual"] = e["drive"] + e["ext"] - (e["elastic"] + e["release"] + e["slip"]
-                                                     + e["kinetic"])
+            e["residual"] = e["drive"] + e["ext"] - (lost + e["kinetic"])
         else:  # prescribed runner: its work is supplied by whatever prescribes it
-            e["residual"] = e["drive"] - e["runner"] - (e["elastic"] + e["release"] + e["slip"])
+            e["residual"] = e["drive"] - e["runner"] - lost
         return e
 
     def normal_force(self) -> float:
