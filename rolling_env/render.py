@@ -35,6 +35,8 @@ def render_frame(env) -> np.ndarray:
              label="uT stick [nm]")
     ax1b.bar((x / a)[inc & slip], (uT * um)[inc & slip], width=drv.grid.dx, color="tab:red",
              label="uT slip [nm]")
+    ax1.set_zorder(ax1b.get_zorder() + 1)  # the normal profile on top of the bars
+    ax1.patch.set_visible(False)
     ax1.set_xlim(-env.scene.stroke_roll / a - 1.2, env.scene.stroke_roll / a + 1.2)
     ax1.set_xlabel("x / a_max (frame of the sphere)")
     ax1.set_ylabel("uN [nm]")

@@ -1,0 +1,236 @@
+"""Slow, plain-numpy REFERENCE of the MDR drive model: the textbook "plain spring row".
+
+See /work/shared/physics.md. A row of independent springs (spacing dx, centres
+x_i = x_lo + (i + 0.5) dx) in the frame that moves with the sphere; a spring is in contact
+iff its centre is (uN_i = d - (x_i - c)^2 / R > 0). Readable rather than fast; no numba,
+float64 throughout. The fast kernel is tested against this, and it is a line on the
+work-precision plot.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def _row(x_lo, x_hi, dx):
+    """Spring centres x_lo + (i + 0.5) dx covering [x_lo, x_hi]."""
+    n = max(1, math.ceil((x_hi - x_lo) / dx - 1e-9))
+    return x_lo + (np.arange(n) + 0.5) * dx
+
+
+def _bisect(residual, lo, hi):
+    """Root of a non-decreasing residual on [lo, hi], bisected to the last float."""
+    for _ in range(400):
+        mid = 0.5 * (lo + hi)
+        if not lo < mid < hi:
+            break
+        if residual(mid) > 0.0:
+            hi = mid
+        else:
+            lo = mid
+    return 0.5 * (lo + hi)
+
+
+def naive_run(*, R, E_star, G_star, mu, m, F_ext, x_lo, x_hi, dx,
+              d, omegaR, v, vstar, dt_tick, n_sub, c0=0.0, vstar0=0.0):
+    """d, omegaR, v, vstar: 1-D arrays, one value per control tick (piecewise constant).
+    vstar is used only when m is inf (prescribed runner velocity); ignored otherwise.
+    F_ext: scalar or one value per tick. Returns a dict of 1-D arrays, one entry per tick,
+    values at the END of each tick unless said:
+      'T'        tangential force [N] at the end of the tick
+      'impulse'  integral of T dt over the tick [N s] (sum of T_after_substep * dt)
+      'N'        normal force sum kN uN [N]
+      'vstar'    runner velocity [m/s]
+      'xstar'    runner displacement [m]
+      'c'        patch centre [m]
+      'slip_work' cumulative [J]
+      'release_work' cumulative [J]
+      'elastic'  tangential elastic energy sum 0.5 kT uT^2 [J]
+      'drive_work' cumulative integral of T*(omegaR - v) dt [J]
+      'runner_work' cumulative integral of T*vstar dt [J]
+    and 'uT' final array, 'x' spring positions."""
+    # ---- input validation ------------------------------------------------------------
+    scalars = dict(R=R, E_star=E_star, G_star=G_star, mu=mu, m=m, x_lo=x_lo, x_hi=x_hi,
+                   dx=dx, dt_tick=dt_tick, c0=c0, vstar0=vstar0)
+    for name, val in scalars.items():
+        if np.isnan(val):
+            raise ValueError(f"{name} is NaN")
+    ticks = {name: np.atleast_1d(np.asarray(a, dtype=np.float64))
+             for name, a in dict(d=d, omegaR=omegaR, v=v, vstar=vstar).items()}
+    n_t = ticks["d"].size
+    F = np.broadcast_to(np.asarray(F_ext, dtype=np.float64), (n_t,)) if np.ndim(F_ext) == 0 \
+        else np.asarray(F_ext, dtype=np.float64)
+    ticks["F_ext"] = F
+    for name, a in ticks.items():
+        if a.ndim != 1 or a.size != n_t:
+            raise ValueError(f"{name} must be 1-D with one value per tick: shape {a.shape}, "
+                             f"but d has {n_t} ticks")
+        if np.isnan(a).any():
+            raise ValueError(f"{name} contains NaN")
+    if not dx > 0:
+        raise ValueError(f"dx must be > 0, got {dx}")
+    if int(n_sub) != n_sub or n_sub < 1:
+        raise ValueError(f"n_sub must be an integer >= 1, got {n_sub}")
+    if not x_hi > x_lo:
+        raise ValueError(f"x_hi must exceed x_lo, got [{x_lo}, {x_hi}]")
+    for name, val in dict(R=R, E_star=E_star, G_star=G_star, dt_tick=dt_tick).items():
+        if not 0 < val < np.inf:
+            raise ValueError(f"{name} must be finite and > 0, got {val}")
+    if mu < 0:
+        raise ValueError(f"mu must be >= 0, got {mu}")
+    if m < 0:
+        raise ValueError(f"m must be >= 0, got {m}")
+    if m == 0 and np.any(F != 0):
+        raise ValueError("F_ext must be 0 when m == 0 (a massless runner cannot carry a load)")
+    if m == np.inf and not np.isfinite(ticks["vstar"]).all():
+        raise ValueError("vstar must be finite when m is inf (prescribed)")
+
+    # ---- state ----------------------------------------------------------------------
+    x = _row(x_lo, x_hi, dx)
+    kN, kT = E_star * dx, G_star * dx
+    dt = dt_tick / n_sub
+    uT = np.zeros_like(x)
+    c, vs, xs = float(c0), float(vstar0), 0.0
+    slip_w = release_w = drive_w = runner_w = 0.0
+    keys = ("T", "impulse", "N", "vstar", "xstar", "c", "slip_work", "release_work",
+            "elastic", "drive_work", "runner_work")
+    out = {k: np.zeros(n_t) for k in keys}
+
+    for k in range(n_t):
+        d_k, wR, v_k, F_k = ticks["d"][k], ticks["omegaR"][k], ticks["v"][k], F[k]
+        impulse = 0.0
+        for _ in range(int(n_sub)):
+            # 1. roll the profile over the springs
+            c += wR * dt
+            uN = d_k - (x - c) ** 2 / R
+            contact = uN > 0.0
+            # 2. release springs that left contact: their elastic energy is dissipated
+            gone = ~contact
+            release_w += 0.5 * kT * np.sum(uT[gone] ** 2)
+            uT[gone] = 0.0
+            # 3. trial deflection as a function of the new runner velocity, then Coulomb
+            lim = np.where(contact, mu * (E_star / G_star) * uN, 0.0) if mu < np.inf else None
+
+            def trial(vs_new):
+                u_tr = np.where(contact, uT + (wR - v_k - vs_new) * dt, 0.0)
+                u_cl = u_tr if lim is None else np.clip(u_tr, -lim, lim)
+                return u_tr, u_cl, kT * np.sum(u_cl)
+
+            n_c = int(contact.sum())
+            if m == np.inf:                                   # prescribed runner
+                vs_new = ticks["vstar"][k]
+            elif lim is None:                                 # T affine: T0 - K dt vs_new
+                T0 = kT * np.sum(np.where(contact, uT + (wR - v_k) * dt, 0.0))
+                K = kT * n_c
+                if m > 0:
+                    vs_new = (m * vs + dt * (T0 + F_k)) / (m + K * dt * dt)
+                else:
+                    vs_new = T0 / (K * dt) if n_c > 0 else 0.0
+            elif m > 0:                                       # dynamics, finite friction
+                T_max = np.sum(mu * kN * np.where(contact, uN, 0.0))
+                vs_new = _bisect(lambda s: m * (s - vs) - dt * (trial(s)[2] + F_k),
+                                 vs + dt * (F_k - T_max) / m, vs + dt * (F_k + T_max) / m)
+            elif n_c == 0:                                    # massless, nothing to hold it
+                vs_new = 0.0
+            else:                                             # massless: T(vs_new) = 0
+                base = wR - v_k + uT[contact] / dt
+                vs_new = _bisect(lambda s: -trial(s)[2],
+                                 np.min(base - lim[contact] / dt),   # all saturated at +lim
+                                 np.max(base + lim[contact] / dt))   # all saturated at -lim
+            # 4. commit
+            u_tr, u_cl, T = trial(vs_new)
+            if lim is not None:
+                slip_w += np.sum(mu * kN * np.where(contact, uN, 0.0) * np.abs(u_tr - u_cl))
+            uT = u_cl
+            vs = float(vs_new)
+            xs += vs * dt
+            impulse += T * dt
+            drive_w += T * (wR - v_k) * dt
+            runner_w += T * vs * dt
+        out["T"][k], out["impulse"][k] = T, impulse
+        out["N"][k] = kN * np.sum(np.where(contact, uN, 0.0))
+        out["vstar"][k], out["xstar"][k], out["c"][k] = vs, xs, c
+        out["slip_work"][k], out["release_work"][k] = slip_w, release_w
+        out["elastic"][k] = 0.5 * kT * np.sum(uT ** 2)
+        out["drive_work"][k], out["runner_work"][k] = drive_w, runner_w
+    out["uT"], out["x"] = uT, x
+    return out
+
+
+def naive_normal_force(d, R, E_star, dx, c=0.0, x_lo=None, x_hi=None):
+    """N = sum kN uN over a row covering the contact (default: symmetric about c)."""
+    if not dx > 0:
+        raise ValueError(f"dx must be > 0, got {dx}")
+    if x_lo is None or x_hi is None:
+        half = (math.ceil(math.sqrt(max(d, 0.0) * R) / dx) + 2) * dx
+        x_lo, x_hi = c - half, c + half
+    x = _row(x_lo, x_hi, dx)
+    uN = d - (x - c) ** 2 / R
+    return E_star * dx * np.sum(uN[uN > 0.0])
+
+
+def naive_mindlin(mu, R, E_star, G_star, d, dx, u_values):
+    """Press to d, then displace tangentially through non-decreasing u_values (runner held,
+    no rolling: omegaR = 0, v = -du/dt, vstar = 0 prescribed). Returns T at each u."""
+    u = np.asarray(u_values, dtype=np.float64)
+    if u.ndim != 1 or np.isnan(u).any() or np.any(np.diff(np.concatenate([[0.0], u])) < 0):
+        raise ValueError("u_values must be 1-D, non-NaN, >= 0 and non-decreasing")
+    half = (math.ceil(math.sqrt(d * R) / dx) + 2) * dx
+    dt_tick = 1.0
+    v = -np.diff(np.concatenate([[0.0], u])) / dt_tick
+    zeros = np.zeros_like(u)
+    res = naive_run(R=R, E_star=E_star, G_star=G_star, mu=mu, m=np.inf, F_ext=0.0,
+                    x_lo=-half, x_hi=half, dx=dx, d=np.full_like(u, d), omegaR=zeros,
+                    v=v, vstar=zeros, dt_tick=dt_tick, n_sub=1)
+    return res["T"]
+
+
+def eq32(delta, eps, w):
+    """v*/(omega R) of physics.md Eq. 32."""
+    return (1 - eps) * (4 / 3 * (1 - delta ** 1.5) - 2 * w * (1 - delta)) / \
+        (4 / 3 - 4 * delta - 2 * w * (1 + delta))
+
+
+def working_point(delta, eps, w, dx_per_a, R=1e-3, E_star=115e9, G_ratio=0.824, d1=1e-7,
+                  omegaR=1e-3, periods=3):
+    """Quasi-static square wave (infinite friction, prescribed vstar): v*/(omega R) from the
+    zero of the last period's impulse, which is affine in vstar."""
+    a1 = math.sqrt(R * d1)
+    dx, W = a1 / dx_per_a, w * a1
+    half_tau = W / omegaR
+    n_sub = math.ceil(W / dx)                       # omegaR dt <= dx
+    sgn = np.tile([1.0, -1.0], periods)
+    kw = dict(R=R, E_star=E_star, G_star=G_ratio * E_star, mu=np.inf, m=np.inf, F_ext=0.0,
+              x_lo=-1.5 * a1 - 2 * dx, x_hi=W + 1.5 * a1 + 2 * dx, dx=dx,
+              d=np.where(sgn > 0, d1, delta * d1), omegaR=sgn * omegaR, v=sgn * eps * omegaR,
+              dt_tick=half_tau, n_sub=n_sub, c0=0.0)
+    imp = [naive_run(vstar=np.full(sgn.size, s), **kw)["impulse"][-2:].sum()
+           for s in (0.0, 0.1 * omegaR)]
+    return -imp[0] / ((imp[1] - imp[0]) / (0.1 * omegaR)) / omegaR
+
+
+if __name__ == "__main__":
+    R, E, G, mu, d1 = 1e-3, 115e9, 0.824 * 115e9, 0.3, 1e-7
+    a1 = math.sqrt(R * d1)
+    N_hertz = 4 / 3 * E * math.sqrt(R) * d1 ** 1.5
+    print("(1) normal force vs Hertz, N =", N_hertz, "N")
+    for per_a in (50, 100):
+        N = naive_normal_force(d1, R, E, a1 / per_a)
+        N_off = naive_normal_force(d1, R, E, a1 / per_a, c=0.37 * a1 / per_a,
+                                   x_lo=-1.1 * a1, x_hi=1.1 * a1)
+        print(f"    dx = a/{per_a:<3d}: rel. error {N / N_hertz - 1:+.3e} (grid centred on the"
+              f" contact), {N_off / N_hertz - 1:+.3e} (contact shifted by 0.37 dx)")
+    u_star = mu * E * d1 / G
+    u = np.linspace(0.0, 1.2 * u_star, 241)[1:]
+    T = naive_mindlin(mu, R, E, G, d1, a1 / 100, u)
+    T_ex = mu * N_hertz * (1 - np.clip(1 - u / u_star, 0.0, None) ** 1.5)
+    rel = np.abs(T / T_ex - 1)
+    print(f"(2) Mindlin at dx = a/100: max rel. error {rel.max():.3e} "
+          f"(at u/u* = {u[rel.argmax()] / u_star:.3f}); "
+          f"for u/u* >= 0.1: {rel[u >= 0.1 * u_star].max():.3e}")
+    ref = eq32(0.7, 0.1, 2.5)
+    print(f"(3) working point (delta, eps, w) = (0.7, 0.1, 2.5): Eq. 32 v*/(omega R) = {ref:.6f}")
+    for per_a in (50, 64, 100, 128, 200):
+        got = working_point(0.7, 0.1, 2.5, per_a)
+        print(f"    dx = a1/{per_a:<3d}: naive {got:.6f}, rel. error {got / ref - 1:+.3e}")
