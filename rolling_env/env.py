@@ -7,6 +7,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from .actions import to_controls
 from .model import Drive, DriveParams
 from .scenes import Scene, load_scene
 
@@ -158,9 +159,7 @@ class RollingDriveEnv(gym.Env):
     def step(self, action):
         a = self._check_action(action)
         sc = self.scene
-        N = sc.N_min + 0.5 * (a[0] + 1.0) * (sc.N_max - sc.N_min)
-        u = a[1] * sc.omega_R_max
-        v = u * (1.0 - a[2] * sc.creep_max)
+        N, u, v = to_controls(sc, a)
         f = min(_travel_factor(self.drive.c, u * self.dt, sc.stroke_roll),
                 _travel_factor(self.drive.x_sphere, v * self.dt, sc.stroke_translate))
         u *= f
