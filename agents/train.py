@@ -1,0 +1,151 @@
+"""Train a Stable-Baselines3 agent on a RollingDrive-v0 scene.
+
+    python -m agents.train --algo ppo --scene default --seed 0 [--n-timesteps N] [--n-envs N]
+
+Hyper-parameters come from ``configs/hyperparams/<algo>.yml`` (RL Zoo format, keyed by scene).
+The run folder (default ``runs/<scene>/<algo>_seed<seed>``) keeps config.yml, command.txt,
+meta.json (seed, package versions, env steps, wall time), the TensorBoard log (tb/), the
+EvalCallback log (evaluations.npz) and best model, periodic checkpoints, and the final
+model.zip with model_vecnormalize.pkl beside it.  Every file is written atomically; Ctrl-C or
+SIGTERM saves a final checkpoint before exiting.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import signal
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+from .common import ALGOS, atomic_write, load_hyperparams, make_vec_env, parse_kwargs, save_model
+
+_ALGO_KEYS = {
+    "ppo": ("n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda", "learning_rate",
+            "ent_coef", "clip_range", "vf_coef", "max_grad_norm"),
+    "sac": ("learning_rate", "buffer_size", "batch_size", "learning_starts", "gamma", "tau",
+            "train_freq", "gradient_steps", "ent_coef"),
+    "td3": ("learning_rate", "buffer_size", "batch_size", "learning_starts", "gamma", "tau",
+            "train_freq", "gradient_steps", "policy_delay"),
+}
+
+
+def build_parser():
+    p = argparse.ArgumentParser(prog="python -m agents.train", description=__doc__.splitlines()[0])
+    p.add_argument("--algo", choices=ALGOS, required=True)
+    p.add_argument("--scene", default="default", help="scene name or YAML path")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--n-timesteps", type=int, default=None, help="override the YAML budget")
+    p.add_argument("--n-envs", type=int, default=None, help="override the YAML n_envs")
+    p.add_argument("--conf", default=None, help="hyper-parameter YAML (default configs/...)")
+    p.add_argument("--run-dir", default=None, help="run folder (default runs/<scene>/<algo>_seed<seed>)")
+    p.add_argument("--eval-freq", type=int, default=10000, help="env steps between evaluations")
+    p.add_argument("--eval-episodes", type=int, default=5)
+    p.add_argument("--checkpoint-freq", type=int, default=50000, help="env steps between checkpoints")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return p
+
+
+class _AtomicCheckpoint:
+    """SB3 callback factory: periodic atomic checkpoints (model + VecNormalize)."""
+
+    @staticmethod
+    def make(folder, every_env_steps):
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        class Cb(BaseCallback):
+            def _on_step(self):
+                n = self.model.num_timesteps
+                if n // every_env_steps > getattr(self, "_last", 0):
+                    self._last = n // every_env_steps
+                    save_model(self.model, self.model.get_vec_normalize_env(), folder,
+                               "checkpoint")
+                return True
+        return Cb()
+
+
+def train(args) -> Path:
+    import numpy as np
+    import stable_baselines3 as sb3
+    import torch
+    from stable_baselines3.common.callbacks import CallbackList, EvalCallback
+    from stable_baselines3.common.noise import NormalActionNoise
+    from stable_baselines3.common.utils import set_random_seed
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    import rolling_env
+
+    torch.set_num_threads(1)
+    hp = load_hyperparams(args.algo, Path(args.scene).stem if args.scene.endswith(".yaml")
+                          else args.scene, args.conf)
+    n_envs = int(args.n_envs or hp.get("n_envs", 1))
+    n_timesteps = int(args.n_timesteps or float(hp["n_timesteps"]))
+    env_kwargs = dict(hp.get("env_kwargs") or {})
+    scene = args.scene
+    run = Path(args.run_dir or f"runs/{Path(scene).stem}/{args.algo}_seed{args.seed}")
+    run.mkdir(parents=True, exist_ok=True)
+    cfg = dict(hp, n_envs=n_envs, n_timesteps=n_timesteps, algo=args.algo, scene=scene,
+               seed=args.seed)
+    atomic_write(run / "config.yml", lambda p: Path(p).write_text(yaml.safe_dump(cfg)))
+    atomic_write(run / "command.txt", lambda p: Path(p).write_text(" ".join(sys.argv) + "\n"))
+
+    set_random_seed(args.seed)
+    env = make_vec_env(scene, n_envs, args.seed, env_kwargs)
+    eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs)
+    norm = parse_kwargs(hp.get("normalize", False))
+    if norm is not None:
+        env = VecNormalize(env, gamma=float(hp.get("gamma", 0.99)), **norm)
+        eval_env = VecNormalize(eval_env, training=False, norm_reward=False,
+                                norm_obs=norm.get("norm_obs", True))
+    kwargs = {k: hp[k] for k in _ALGO_KEYS[args.algo] if k in hp}
+    if args.algo == "td3" and hp.get("noise_type") == "normal":
+        kwargs["action_noise"] = NormalActionNoise(np.zeros(3), float(hp["noise_std"]) * np.ones(3))
+    cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[args.algo]
+    model = cls(hp.get("policy", "MlpPolicy"), env, seed=args.seed, verbose=0, device="cpu",
+                tensorboard_log=str(run / "tb"),
+                policy_kwargs=parse_kwargs(hp.get("policy_kwargs")), **kwargs)
+    callbacks = CallbackList([
+        EvalCallback(eval_env, best_model_save_path=str(run), log_path=str(run),
+                     eval_freq=max(args.eval_freq // n_envs, 1),
+                     n_eval_episodes=args.eval_episodes, deterministic=True, verbose=0),
+        _AtomicCheckpoint.make(run, max(args.checkpoint_freq, 1)),
+    ])
+
+    def on_term(signum, frame):
+        raise KeyboardInterrupt
+    old = signal.signal(signal.SIGTERM, on_term)
+    t0 = time.perf_counter()
+    interrupted = False
+    try:
+        model.learn(n_timesteps, callback=callbacks, progress_bar=not args.no_progress,
+                    tb_log_name=args.algo)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        signal.signal(signal.SIGTERM, old)
+    wall = time.perf_counter() - t0
+    save_model(model, model.get_vec_normalize_env(), run,
+               "checkpoint" if interrupted else "model")
+    meta = {
+        "algo": args.algo, "scene": scene, "seed": args.seed, "env_steps": int(model.num_timesteps),
+        "wall_seconds": wall, "interrupted": interrupted, "n_envs": n_envs,
+        "rolling_drive": rolling_env.__version__, "stable_baselines3": sb3.__version__,
+        "torch": torch.__version__, "python": platform.python_version(),
+        "machine": f"{platform.machine()}, {__import__('os').cpu_count()} CPU cores, no GPU",
+    }
+    atomic_write(run / "meta.json", lambda p: Path(p).write_text(json.dumps(meta, indent=1)))
+    print(json.dumps(meta))
+    return run
+
+
+def main(argv=None):
+    args = build_parser().parse_args(argv)
+    train(args)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
