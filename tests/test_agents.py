@@ -1,0 +1,166 @@
+"""Baselines and the training/evaluation scripts, run for real (short budgets)."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import rolling_env
+from agents.baselines import Eq32Design, Eq32Feedback, Eq32OpenLoop
+from agents.common import atomic_write, load_hyperparams, parse_kwargs
+from agents.evaluate import episode_metrics, held_out_targets, load_agent
+from rolling_env import analytic
+from rolling_env.rollout import rollout
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def _final_errors(scene, cls, n):
+    env = rolling_env.make(scene)
+    ctrl = cls.from_env(env)
+    tol = env.unwrapped.scene.tolerance
+    return [abs(rollout(env, ctrl, seed=i, target=t)["final_error"]) / tol
+            for i, t in enumerate(held_out_targets(scene, n))]
+
+
+def test_open_loop_exact_in_heavy_infinite_friction_scene():
+    """Heavy runner, infinite friction: Eq. 32 (with the start-up lag from the impulse slope)
+    puts the runner within the scene's tolerance (0.2 um on 2-20 um targets) on every target."""
+    errs = _final_errors("heavy_inf_friction", Eq32OpenLoop, 4)
+    assert max(errs) < 1.0, f"open-loop final |error| / tolerance: {np.round(errs, 2)}"
+
+
+@pytest.mark.parametrize("scene", ["default", "resonant"])
+def test_feedback_at_least_as_good_as_open_loop(scene):
+    """Where Eq. 32 is inexact the feedback baseline's mean final error is no worse (10% slack)."""
+    fb = np.mean(_final_errors(scene, Eq32Feedback, 4))
+    ol = np.mean(_final_errors(scene, Eq32OpenLoop, 4))
+    assert fb <= 1.1 * ol, f"{scene}: feedback {fb:.2f} vs open loop {ol:.2f} (x tolerance)"
+
+
+def test_design_inverts_eq32_and_stays_wearless():
+    env = rolling_env.make("default")
+    d = Eq32Design(env.unwrapped.scene)
+    for frac in (0.01, 0.2, 0.7, 1.0):
+        delta, creep = d.choose(frac * d.v_max)
+        assert abs(d.speed(delta, creep) - frac * d.v_max) < 1e-9 * d.v_max
+        assert creep <= d.creep_cap * (1 + 1e-12), "creep must stay in the wearless window"
+    # the wearless window of physics.md: creep * w * a1 < mu (E*/G*) a1^2 / R
+    sc = env.unwrapped.scene
+    assert d.creep_cap * d.w * d.a1 < sc.mu * sc.E_star / sc.G_star * d.a1 ** 2 / sc.R
+    r = rollout(env, Eq32OpenLoop.from_env(env), seed=0, target=2e-7)
+    # mostly stuck: far less friction work than sliding the runner's whole travel at mu N_max
+    # (edge cells with uN -> 0 always slip a little; measured about 3%)
+    assert r["total_slip_work"] < 0.05 * sc.mu * sc.N_max * 2e-7, r["total_slip_work"]
+
+
+def test_relaxation_time_matches_simulated_lag():
+    """t_r from the impulse slope: a runner started at rest lags v_wp t_r once relaxed (15%)."""
+    env = rolling_env.make("heavy_inf_friction")
+    d = Eq32Design(env.unwrapped.scene)
+    delta, creep = d.choose(0.5 * d.v_max)
+    v = d.speed(delta, creep)
+    tr = d.relaxation_time(delta)
+    env.reset(seed=0, options={"target": 1.0})
+    x = []
+    for k in range(512):
+        x.append(env.step(d.action(k, delta, creep, 1))[4]["xstar"])
+    t = (np.arange(512) + 1) * env.unwrapped.dt
+    lag = np.mean(v * t[-64:] - np.array(x[-64:]))
+    assert abs(lag - v * tr) < 0.15 * v * tr, f"lag {lag:.3e} m vs v_wp t_r {v * tr:.3e} m"
+
+
+def test_batch_predict_matches_single():
+    env = rolling_env.make("default")
+    ctrl_a, ctrl_b = Eq32Feedback.from_env(env), Eq32Feedback.from_env(env)
+    obs = np.tile(env.reset(seed=0, options={"target": 2e-7})[0], (3, 1))
+    a_batch, _ = ctrl_a.predict(obs, episode_start=np.ones(3, bool))
+    a_one, _ = ctrl_b.predict(obs[0], episode_start=np.array([True]))
+    assert a_batch.shape == (3, 3) and np.array_equal(a_batch[1], a_one)
+
+
+def test_hyperparams_rl_zoo_format():
+    for algo in ("ppo", "sac", "td3"):
+        hp = load_hyperparams(algo, "resonant")
+        assert hp["env_kwargs"]["scene"] == "resonant"
+        assert {"n_envs", "n_timesteps", "normalize", "policy_kwargs"} <= set(hp)
+        assert isinstance(parse_kwargs(hp["policy_kwargs"]), dict)
+    assert load_hyperparams("ppo", "my_scene")["env_kwargs"]["scene"] == "my_scene"
+
+
+def test_atomic_write_never_leaves_partial_file(tmp_path):
+    target = tmp_path / "model.zip"
+    target.write_text("old")
+
+    def broken(p):
+        Path(p).write_text("half")
+        raise RuntimeError("killed mid-write")
+    with pytest.raises(RuntimeError):
+        atomic_write(target, broken)
+    assert target.read_text() == "old" and list(tmp_path.iterdir()) == [target]
+    atomic_write(target, lambda p: Path(p).write_text("new"))
+    assert target.read_text() == "new"
+
+
+def _train(tmp_path, *extra, timesteps=512):
+    cmd = [sys.executable, "-m", "agents.train", "--algo", "ppo", "--scene", "default",
+           "--seed", "3", "--n-timesteps", str(timesteps), "--n-envs", "2", "--eval-freq", "512",
+           "--eval-episodes", "1", "--no-progress", "--run-dir", str(tmp_path / "run"), *extra]
+    return cmd
+
+
+def test_short_training_run_saves_loadable_model(tmp_path):
+    out = subprocess.run(_train(tmp_path), cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    run = tmp_path / "run"
+    for f in ("model.zip", "model_vecnormalize.pkl", "config.yml", "command.txt", "meta.json",
+              "evaluations.npz"):
+        assert (run / f).exists(), f"missing {f}"
+    meta = json.loads((run / "meta.json").read_text())
+    assert meta["env_steps"] >= 512 and meta["seed"] == 3 and not meta["interrupted"]
+    env = rolling_env.make("default")
+    agent = load_agent(run / "model.zip", env)
+    data = rollout(env, agent, seed=0, target=2e-7)
+    m = episode_metrics(data, env.unwrapped.scene.tolerance)
+    assert np.isfinite(m["final_abs_error"]) and len(data["step"]) == 512
+
+
+def test_interrupted_training_leaves_loadable_checkpoint(tmp_path):
+    proc = subprocess.Popen(_train(tmp_path, timesteps=10 ** 7), cwd=REPO,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    run = tmp_path / "run"
+    deadline = time.time() + 120
+    while not (run / "evaluations.npz").exists() and time.time() < deadline:
+        time.sleep(0.5)
+    proc.send_signal(signal.SIGTERM)
+    proc.wait(timeout=120)
+    assert proc.returncode == 0
+    meta = json.loads((run / "meta.json").read_text())
+    assert meta["interrupted"] and (run / "checkpoint.zip").exists()
+    env = rolling_env.make("default")
+    agent = load_agent(run / "checkpoint.zip", env)
+    obs, _ = env.reset(seed=0)
+    a, _ = agent.predict(obs)
+    assert env.action_space.contains(np.asarray(a, np.float32))
+    assert not [p for p in run.iterdir() if p.name.startswith(".")], "temp files left behind"
+
+
+@pytest.mark.slow
+def test_ppo_learns_to_move_the_runner(tmp_path):
+    """Slow: 100k PPO steps on the heavy scene beat the zero policy's mean final error by 2x."""
+    out = subprocess.run(_train(tmp_path, timesteps=100_000), cwd=REPO, capture_output=True,
+                         text=True, timeout=3000)
+    assert out.returncode == 0, out.stderr[-2000:]
+    env = rolling_env.make("default")
+    agent = load_agent(tmp_path / "run" / "model.zip", env)
+    errs = [abs(rollout(env, agent, seed=i, target=t)["final_error"])
+            for i, t in enumerate(held_out_targets("default", 5))]
+    zero = np.mean(np.abs(held_out_targets("default", 5)))
+    assert np.mean(errs) < 0.5 * zero, f"PPO final error {np.mean(errs):.3e} vs zero {zero:.3e}"
