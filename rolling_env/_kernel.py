@@ -101,6 +101,14 @@ def _normal_content(xL, xR, c, a, d, R):
     return val if val > 0.0 else 0.0
 
 
+@njit(cache=True, inline="always")
+def _contact_range(c, a, x_lo, dx, n):
+    """First and last cell touching the contact [c - a, c + a], clamped to the row."""
+    i0 = max(int(math.floor((c - a - x_lo) / dx)), 0)
+    i1 = min(int(math.floor((c + a - x_lo) / dx)), n - 1)
+    return i0, i1
+
+
 @njit(cache=True)
 def _walk(U0, xL, xR, c0, a, u, dt, res):
     """Exact creep integration of one cell over a sub-step (uniform-cell model).
@@ -239,8 +247,7 @@ def _set_radius(U, st, p, a_new, d_new, mu):
     x_lo = p[P_X_LO]
     dx = p[P_DX]
     n = U.shape[0]
-    i0 = max(int(math.floor((c - a_old - x_lo) / dx)), 0)
-    i1 = min(int(math.floor((c + a_old - x_lo) / dx)), n - 1)
+    i0, i1 = _contact_range(c, a_old, x_lo, dx, n)
     rel = 0.0
     slip = 0.0
     snap = 0.0
@@ -469,8 +476,7 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
         out[OUT_STICK] = 1.0 if a > 0.0 else 0.0
     else:
         c = st[ST_C]
-        i0 = max(int(math.floor((c - a - x_lo) / dx)), 0)
-        i1 = min(int(math.floor((c + a - x_lo) / dx)), n - 1)
+        i0, i1 = _contact_range(c, a, x_lo, dx, n)
         stuck = 0.0
         for i in range(i0, i1 + 1):
             if abs(U[i]) < L[i] * (1.0 - 1e-12):
@@ -517,8 +523,7 @@ def elastic_energy(U, st, p):
     n = U.shape[0]
     if a <= 0.0:
         return 0.0
-    i0 = max(int(math.floor((c - a - x_lo) / dx)), 0)
-    i1 = min(int(math.floor((c + a - x_lo) / dx)), n - 1)
+    i0, i1 = _contact_range(c, a, x_lo, dx, n)
     e = 0.0
     for i in range(i0, i1 + 1):
         xL = x_lo + i * dx
@@ -539,8 +544,7 @@ def normal_force_sum(st, p, n):
     dx = p[P_DX]
     if a <= 0.0:
         return 0.0
-    i0 = max(int(math.floor((c - a - x_lo) / dx)), 0)
-    i1 = min(int(math.floor((c + a - x_lo) / dx)), n - 1)
+    i0, i1 = _contact_range(c, a, x_lo, dx, n)
     total = 0.0
     for i in range(i0, i1 + 1):
         xL = x_lo + i * dx
