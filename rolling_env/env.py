@@ -7,7 +7,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .actions import to_controls
+from . import _envkernel as EK
+from . import _kernel as K
 from .model import Drive, DriveParams
 from .scenes import Scene, load_scene
 
@@ -16,7 +17,7 @@ OBS_NAMES = (
     "stick_fraction", "clock_sin", "clock_cos", "time_fraction", "last_N", "last_roll",
     "last_creep",
 )
-OBS_BOUND = 10.0
+OBS_BOUND = EK.OBS_BOUND
 
 
 class RollingDriveEnv(gym.Env):
@@ -109,78 +110,53 @@ class RollingDriveEnv(gym.Env):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None,"
                              f" got {render_mode!r}")
         self.render_mode = render_mode
-        sc = self.scene
-        self.params = DriveParams(sc.R, sc.E_star, sc.G_star, mu=sc.mu,
-                                  m=sc.runner_mass, F_ext=sc.F_ext)
-        d_max = (3 * sc.N_max / (4 * sc.E_star * math.sqrt(sc.R))) ** (2 / 3)
-        self.a_max = math.sqrt(sc.R * d_max)
-        self.drive = Drive(self.params, a_ref=self.a_max, resolution=sc.resolution,
-                           stroke=(-sc.stroke_roll, sc.stroke_roll), a_max=self.a_max,
-                           t_ref=sc.period)
+        self.drive, self.a_max = build_drive(self.scene)
         self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
         self.observation_space = spaces.Box(-OBS_BOUND, OBS_BOUND, (len(OBS_NAMES),), np.float32)
-        self.v_ref = 0.3 * sc.creep_max * sc.omega_R_max
-        T_stuck = 2 * self.a_max * sc.G_star * sc.creep_max * sc.stroke_roll
-        self.T_ref = min(sc.mu * sc.N_max, T_stuck)
-        self.wear_ref = (sc.mu * sc.N_max * sc.creep_max * sc.omega_R_max * sc.dt
-                         if math.isfinite(sc.mu) else 1.0)
-        self.dt = sc.dt
-        self.target = 0.0
-        self._step = 0
-        self._last = np.zeros(3)
-        self._out = None
+        self.dt = self.scene.dt
+        self._features = self.drive.kernel_features
+        self._sv = EK.scene_vector(self.scene, self.a_max, self.drive)
+        drv = self.drive
+        # batch-of-one views of the drive's arrays for the env kernel
+        self._arrays = (drv.U[None], drv.A[None], drv.B[None], drv.L[None], drv.st[None],
+                        drv._p[None])
+        self._act = np.zeros((1, 3))
+        self._target = np.zeros(1)
+        self._steps = np.zeros(1, dtype=np.int64)
+        self._out = np.zeros((1, K.N_OUT))
+        self._obs = np.zeros((1, EK.N_OBS))
+        self._extra = np.zeros((1, EK.N_X))
         self._history = []
+
+    @property
+    def target(self) -> float:
+        return float(self._target[0])
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
-        sc = self.scene
-        if options is not None and "target" in options:
-            t = options["target"]
-            try:
-                t = float(t)
-            except (TypeError, ValueError):
-                raise ValueError(f"options['target'] must be a number [m], got {t!r}") from None
-            if not math.isfinite(t) or abs(t) > 1.0:
-                raise ValueError(f"options['target'] must be a finite displacement in [-1, 1] m, "
-                                 f"got {t!r}")
-            self.target = t
-        else:
-            mag = self.np_random.uniform(sc.target_min, sc.target_max)
-            sign = self.np_random.choice((-1.0, 1.0)) if sc.target_both_signs else 1.0
-            self.target = float(sign * mag)
+        self._target[0] = sample_target(self.scene, self.np_random, options)
         self.drive.reset()
-        self._step = 0
-        self._last = np.zeros(3)
-        self._out = {"N": 0.0, "T": 0.0, "stick_fraction": 0.0}
+        self._steps[0] = 0
+        self._extra[:] = 0.0
+        self._extra[0, EK.X_SAT] = 1.0
+        EK.reset_obs(0, self._sv, self._target, self._obs)
         self._history = [0.0]
-        return self._obs(), self._info(0.0, 0.0, 1.0, 0.0, 0.0)
+        return self._obs[0].astype(np.float32), self._info()
 
     def step(self, action):
-        a = self._check_action(action)
-        sc = self.scene
-        N, u, v = to_controls(sc, a)
-        f = min(_travel_factor(self.drive.c, u * self.dt, sc.stroke_roll),
-                _travel_factor(self.drive.x_sphere, v * self.dt, sc.stroke_translate))
-        u *= f
-        v *= f
-        out = self.drive.run(dt_tick=self.dt, n_sub=sc.sub_steps, omega_R=u, v=v, N=N)
-        self._out = {k: float(val[0]) for k, val in out.items()}
-        self._step += 1
-        self._last = a
-        self._history.append(self.drive.xstar)
-        err = self.target - self.drive.xstar
-        r_track = -sc.w_track * abs(err) / sc.target_max
-        slip = self._out["slip_work"]
-        r_wear = -sc.w_wear * slip / self.wear_ref
-        reward = r_track + r_wear
-        obs = self._obs()
-        if not (np.all(np.isfinite(obs)) and math.isfinite(reward)):
+        self._act[0] = check_actions(action, (3,))
+        U, A, B, L, st, p = self._arrays
+        EK.env_step_serial(self._act, self._sv, self._target, self._steps, U, A, B, L, st, p,
+                           self._out, self._obs, self._extra, *self._features)
+        x = self._extra[0]
+        if not (math.isfinite(x[EK.X_REWARD]) and math.isfinite(x[EK.X_VS])):
             raise FloatingPointError("non-finite state after a physics tick")
-        info = self._info(r_track, r_wear, f, u, v)
+        self.drive._check_flags()
+        self._history.append(x[EK.X_XS])
         if self.render_mode == "human":
             self.render()
-        return obs, float(reward), False, False, info
+        return self._obs[0].astype(np.float32), float(x[EK.X_REWARD]), False, False, self._info()
 
     def render(self):
         if self.render_mode is None:
@@ -198,59 +174,68 @@ class RollingDriveEnv(gym.Env):
         from .render import close
         close()
 
-    # ------------------------------------------------------------------ helpers
-    def _check_action(self, action) -> np.ndarray:
-        a = np.asarray(action, dtype=np.float64)
-        if a.shape != (3,):
-            raise ValueError(f"action must have shape (3,), got {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"action must be finite, got {a.tolist()}")
-        if np.any(np.abs(a) > 1.0 + 1e-6):
-            raise ValueError(f"action must lie in [-1, 1] (the action space), got {a.tolist()}")
-        return np.clip(a, -1.0, 1.0)
-
-    def _obs(self) -> np.ndarray:
-        sc, drv, o = self.scene, self.drive, self._out
-        t = self._step * self.dt
-        ph = 2 * math.pi * t / sc.period
-        obs = np.array([
-            (self.target - drv.xstar) / sc.target_max,
-            drv.vstar / self.v_ref,
-            drv.c / sc.stroke_roll,
-            drv.x_sphere / sc.stroke_translate,
-            o["N"] / sc.N_max,
-            o["T"] / self.T_ref,
-            o["stick_fraction"],
-            math.sin(ph), math.cos(ph),
-            self._step / sc.episode_steps,
-            self._last[0], self._last[1], self._last[2],
-        ])
-        return np.clip(obs, -OBS_BOUND, OBS_BOUND).astype(np.float32)
-
-    def _info(self, r_track, r_wear, f, u, v) -> dict:
-        o, drv = self._out, self.drive
-        return {
-            "reward_track": r_track,
-            "reward_wear": r_wear,
-            "target": self.target,
-            "xstar": drv.xstar,
-            "vstar": drv.vstar,
-            "error": self.target - drv.xstar,
-            "slip_work": o.get("slip_work", 0.0),
-            "N": o["N"],
-            "T": o["T"],
-            "stick_fraction": o["stick_fraction"],
-            "omega_R": u,
-            "v": v,
-            "saturation": f,
-            "saturated": f < 1.0,
-        }
+    def _info(self) -> dict:
+        return info_dict(self._extra[0], self._target[0])
 
 
-def _travel_factor(pos: float, step: float, limit: float) -> float:
-    """Largest f in [0, 1] with |pos + f step| <= limit."""
-    new = pos + step
-    if abs(new) <= limit or step == 0.0:
-        return 1.0
-    room = (math.copysign(limit, step) - pos) / step
-    return float(min(max(room, 0.0), 1.0)) if room > 1e-12 else 0.0
+def build_drive(scene: Scene) -> tuple[Drive, float]:
+    """The spring row of a scene: grid over the rolling stroke, a_ref = a_max = contact radius
+    at N_max, time scale = the nominal period."""
+    sc = scene
+    params = DriveParams(sc.R, sc.E_star, sc.G_star, mu=sc.mu, m=sc.runner_mass, F_ext=sc.F_ext)
+    d_max = (3 * sc.N_max / (4 * sc.E_star * math.sqrt(sc.R))) ** (2 / 3)
+    a_max = math.sqrt(sc.R * d_max)
+    drive = Drive(params, a_ref=a_max, resolution=sc.resolution,
+                  stroke=(-sc.stroke_roll, sc.stroke_roll), a_max=a_max, t_ref=sc.period)
+    return drive, a_max
+
+
+def sample_target(scene: Scene, rng, options) -> float:
+    """options['target'] [m] if given (checked), else uniform in [target_min, target_max] with a
+    random sign when target_both_signs, drawn from the env's generator ``rng``."""
+    if options is not None and "target" in options:
+        t = options["target"]
+        try:
+            t = float(t)
+        except (TypeError, ValueError):
+            raise ValueError(f"options['target'] must be a number [m], got {t!r}") from None
+        if not math.isfinite(t) or abs(t) > 1.0:
+            raise ValueError(f"options['target'] must be a finite displacement in [-1, 1] m, "
+                             f"got {t!r}")
+        return t
+    mag = rng.uniform(scene.target_min, scene.target_max)
+    sign = rng.choice((-1.0, 1.0)) if scene.target_both_signs else 1.0
+    return float(sign * mag)
+
+
+def check_actions(action, shape) -> np.ndarray:
+    """Actions as float64 of ``shape``: finite and inside [-1, 1] (1e-6 tolerance), else
+    ValueError."""
+    a = np.asarray(action, dtype=np.float64)
+    if a.shape != shape:
+        raise ValueError(f"action must have shape {shape}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"action must be finite, got {a.tolist()}")
+    if np.any(np.abs(a) > 1.0 + 1e-6):
+        raise ValueError(f"action must lie in [-1, 1] (the action space), got {a.tolist()}")
+    return a
+
+
+def info_dict(x, target) -> dict:
+    """The per-step info of one env from its row of the kernel's extras."""
+    return {
+        "reward_track": float(x[EK.X_TRACK]),
+        "reward_wear": float(x[EK.X_WEAR]),
+        "target": float(target),
+        "xstar": float(x[EK.X_XS]),
+        "vstar": float(x[EK.X_VS]),
+        "error": float(target - x[EK.X_XS]),
+        "slip_work": float(x[EK.X_SLIP]),
+        "N": float(x[EK.X_N]),
+        "T": float(x[EK.X_T]),
+        "stick_fraction": float(x[EK.X_STICK]),
+        "omega_R": float(x[EK.X_U]),
+        "v": float(x[EK.X_V]),
+        "saturation": float(x[EK.X_SAT]),
+        "saturated": bool(x[EK.X_SAT] < 1.0),
+    }

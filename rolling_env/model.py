@@ -126,6 +126,11 @@ class Drive:
         self.L = np.zeros(n if finite_mu else 1)  # no friction limits without friction
         self.st = np.zeros(K.N_STATE)
 
+    @property
+    def kernel_features(self):
+        """(mu, mass, load) as the kernel takes them: None where the feature is absent."""
+        return self._mu, self._mass, self._load
+
     # ------------------------------------------------------------------ state
     def reset(self, c0: float = 0.0, vstar0: float = 0.0) -> None:
         """Release every spring, patch centre at c0 [m], runner at rest or at vstar0 [m/s]."""

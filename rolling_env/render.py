@@ -41,9 +41,9 @@ def render_frame(env) -> np.ndarray:
     ax1.set_xlabel("x / a_max (frame of the sphere)")
     ax1.set_ylabel("uN [nm]")
     ax1b.set_ylabel("uT [nm]")
-    o = env._out or {}
-    ax1.set_title(f"{env.scene.name}: N = {o.get('N', 0):.3g} N, T = {o.get('T', 0):.3g} N, "
-                  f"stick {100 * o.get('stick_fraction', 0):.0f}%")
+    o = env._info()
+    ax1.set_title(f"{env.scene.name}: N = {o['N']:.3g} N, T = {o['T']:.3g} N, "
+                  f"stick {100 * o['stick_fraction']:.0f}%")
     h = np.asarray(env._history)
     t = np.arange(h.size) * env.dt * 1e3
     ax2.plot(t, h * um, color="tab:green", label="runner x*")

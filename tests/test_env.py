@@ -210,3 +210,17 @@ def test_registration_without_import():
             "env.reset(seed=0); print(env.step(env.action_space.sample())[0].shape)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "(13,)", out.stderr
+
+
+def test_kernel_action_mapping_matches_documented_mapping():
+    """The compiled env tick maps actions exactly as rolling_env.actions.to_controls documents."""
+    from rolling_env.actions import from_controls, to_controls
+    env = gym.make("RollingDrive-v0").unwrapped
+    env.reset(seed=0)
+    for a in np.random.default_rng(1).uniform(-0.2, 0.2, (20, 3)):
+        info = env.step(a.astype(np.float32))[4]
+        N, u, v = to_controls(env.scene, a.astype(np.float32).astype(np.float64))
+        assert info["saturation"] == 1.0
+        assert abs(info["N"] - N) < 1e-12 * N and info["omega_R"] == u and info["v"] == v
+        back = from_controls(env.scene, N, u, 1 - v / u)
+        assert np.allclose(back, a, atol=1e-6)

@@ -1,0 +1,146 @@
+"""Private numba kernel of one control tick of RollingDrive-v0 for a batch of envs.
+
+Action mapping, stroke saturation, the physics tick (``_kernel._tick``), observation and
+reward in one compiled call.  The single env runs it with a batch of one, the vector envs with
+N, so both give bit-identical transitions by construction.  Scene constants travel in ``sv``
+(indices ``S_*``); everything is SI outside ``_tick``.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from . import _kernel as K
+
+# scene vector
+S_N_MIN, S_N_MAX, S_UMAX, S_CREEP, S_STROKE_R, S_STROKE_T, S_R, S_E = range(8)
+S_DT, S_L0, S_T0, S_F0, S_W0, S_TMAX, S_VREF, S_TREF, S_WREF = range(8, 17)
+S_WTRACK, S_WWEAR, S_PERIOD, S_EPISODE, S_NSUB = range(17, 22)
+N_SV = 22
+
+# per-env extras written besides the observation: reward terms and info values
+X_REWARD, X_TRACK, X_WEAR, X_SAT, X_U, X_V, X_N, X_T, X_SLIP, X_STICK, X_XS, X_VS = range(12)
+N_X = 12
+N_OBS = 13
+OBS_BOUND = 10.0
+
+
+@njit(cache=True, inline="always")
+def _travel(pos, step, limit):
+    new = pos + step
+    if abs(new) <= limit or step == 0.0:
+        return 1.0
+    room = (math.copysign(limit, step) - pos) / step
+    if room > 1e-12:
+        return min(max(room, 0.0), 1.0)
+    return 0.0
+
+
+@njit(cache=True, inline="always")
+def _clip(x):
+    return min(max(x, -OBS_BOUND), OBS_BOUND)
+
+
+@njit(cache=True)
+def _env_tick(e, act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass, load):
+    a0 = min(max(act[e, 0], -1.0), 1.0)
+    a1 = min(max(act[e, 1], -1.0), 1.0)
+    a2 = min(max(act[e, 2], -1.0), 1.0)
+    N = sv[S_N_MIN] + 0.5 * (a0 + 1.0) * (sv[S_N_MAX] - sv[S_N_MIN])
+    u = a1 * sv[S_UMAX]
+    v = u * (1.0 - a2 * sv[S_CREEP])
+    dt = sv[S_DT]
+    L0 = sv[S_L0]
+    t0 = sv[S_T0]
+    ste = st[e]
+    f = min(_travel(ste[K.ST_C] * L0, u * dt, sv[S_STROKE_R]),
+            _travel(ste[K.ST_XSPH] * L0, v * dt, sv[S_STROKE_T]))
+    u *= f
+    v *= f
+    d = (3.0 * N / (4.0 * sv[S_E] * math.sqrt(sv[S_R]))) ** (2.0 / 3.0)
+    ts = t0 / L0
+    n_sub = int(sv[S_NSUB])
+    K._tick(U[e], A[e], B[e], L[e], ste, p[e], d / L0, u * ts, v * ts, 0.0, mu, mass, load,
+            n_sub, dt / n_sub / t0, out[e])
+    steps[e] += 1
+    oe = out[e]
+    xs = ste[K.ST_XS] * L0
+    vs = ste[K.ST_VS] * L0 / t0
+    Nn = oe[K.OUT_N] * sv[S_F0]
+    T = oe[K.OUT_T] * sv[S_F0]
+    slip = oe[K.OUT_SLIP] * sv[S_W0]
+    err = target[e] - xs
+    k = steps[e]
+    ph = 2.0 * math.pi * (k * dt) / sv[S_PERIOD]
+    ob = obs[e]
+    ob[0] = _clip(err / sv[S_TMAX])
+    ob[1] = _clip(vs / sv[S_VREF])
+    ob[2] = _clip(ste[K.ST_C] * L0 / sv[S_STROKE_R])
+    ob[3] = _clip(ste[K.ST_XSPH] * L0 / sv[S_STROKE_T])
+    ob[4] = _clip(Nn / sv[S_N_MAX])
+    ob[5] = _clip(T / sv[S_TREF])
+    ob[6] = oe[K.OUT_STICK]
+    ob[7] = math.sin(ph)
+    ob[8] = math.cos(ph)
+    ob[9] = _clip(k / sv[S_EPISODE])
+    ob[10] = a0
+    ob[11] = a1
+    ob[12] = a2
+    track = -sv[S_WTRACK] * abs(err) / sv[S_TMAX]
+    wear = -sv[S_WWEAR] * slip / sv[S_WREF]
+    x = extra[e]
+    x[X_REWARD] = track + wear
+    x[X_TRACK] = track
+    x[X_WEAR] = wear
+    x[X_SAT] = f
+    x[X_U] = u
+    x[X_V] = v
+    x[X_N] = Nn
+    x[X_T] = T
+    x[X_SLIP] = slip
+    x[X_STICK] = oe[K.OUT_STICK]
+    x[X_XS] = xs
+    x[X_VS] = vs
+
+
+@njit(cache=True)
+def env_step_serial(act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass, load):
+    for e in range(act.shape[0]):
+        _env_tick(e, act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass, load)
+
+
+@njit(cache=True, parallel=True)
+def env_step_parallel(act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass, load):
+    for e in prange(act.shape[0]):
+        _env_tick(e, act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass, load)
+
+
+@njit(cache=True)
+def reset_obs(e, sv, target, obs):
+    """Observation right after a reset (runner at rest, no contact, step 0)."""
+    ob = obs[e]
+    for i in range(N_OBS):
+        ob[i] = 0.0
+    ob[0] = _clip(target[e] / sv[S_TMAX])
+    ob[8] = 1.0  # cos(0)
+
+
+def scene_vector(scene, a_max: float, drive) -> np.ndarray:
+    """Scene constants for the kernel (see ``S_*``)."""
+    sc = scene
+    v_ref = 0.3 * sc.creep_max * sc.omega_R_max
+    T_stuck = 2 * a_max * sc.G_star * sc.creep_max * sc.stroke_roll
+    T_ref = min(sc.mu * sc.N_max, T_stuck)
+    wear_ref = (sc.mu * sc.N_max * sc.creep_max * sc.omega_R_max * sc.dt
+                if math.isfinite(sc.mu) else 1.0)
+    sv = np.zeros(N_SV)
+    sv[[S_N_MIN, S_N_MAX, S_UMAX, S_CREEP, S_STROKE_R, S_STROKE_T, S_R, S_E]] = (
+        sc.N_min, sc.N_max, sc.omega_R_max, sc.creep_max, sc.stroke_roll, sc.stroke_translate,
+        sc.R, sc.E_star)
+    sv[[S_DT, S_L0, S_T0, S_F0, S_W0, S_TMAX, S_VREF, S_TREF, S_WREF]] = (
+        sc.dt, drive.L0, drive.t0, drive.F0, drive.W0, sc.target_max, v_ref, T_ref, wear_ref)
+    sv[[S_WTRACK, S_WWEAR, S_PERIOD, S_EPISODE, S_NSUB]] = (
+        sc.w_track, sc.w_wear, sc.period, sc.episode_steps, sc.sub_steps)
+    return sv
