@@ -1,0 +1,230 @@
+"""Natively batched RollingDrive-v0: one compiled call steps N envs.
+
+``BatchCore`` holds N envs' state with a leading env axis and steps them all in one call of the
+env kernel (the same ``_envkernel`` tick the single env runs with a batch of one, so the
+transitions are bit-identical to N single envs).  Two thin adapters:
+
+* ``RollingDriveVectorEnv`` (``gymnasium.vector.VectorEnv``, NEXT_STEP autoreset), the
+  ``vector_entry_point`` of ``gym.make_vec("RollingDrive-v0", num_envs=N)``;
+* ``RollingDriveVecEnv`` (Stable-Baselines3 ``VecEnv``, same-step autoreset with
+  ``terminal_observation`` and ``TimeLimit.truncated``), for training.
+
+Seeding follows Gymnasium: env i of a batch seeded s behaves like a single env seeded s + i.
+The threaded kernel (``prange``) is used from ``PARALLEL_MIN_ENVS`` envs on; below that the
+serial kernel is faster (thread start-up costs more than the work), see results/benchmarks.md.
+"""
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+
+from . import _envkernel as EK
+from . import _kernel as K
+from .env import OBS_NAMES, build_drive, check_actions, info_dict, sample_target
+from .scenes import load_scene
+
+PARALLEL_MIN_ENVS = 64
+
+
+class BatchCore:
+    """N envs of one scene: state arrays with a leading env axis, ``step``, ``reset(mask)``."""
+
+    def __init__(self, num_envs: int, scene="default", max_episode_steps=None, **overrides):
+        if int(num_envs) != num_envs or num_envs < 1:
+            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs}")
+        n = int(num_envs)
+        self.num_envs = n
+        self.scene = load_scene(scene, **overrides)
+        self.max_episode_steps = (self.scene.episode_steps if max_episode_steps is None
+                                  else int(max_episode_steps))
+        drive, self.a_max = build_drive(self.scene)
+        self.drive = drive  # template (grid, scales)
+        self.features = drive.kernel_features
+        self.sv = EK.scene_vector(self.scene, self.a_max, drive)
+        m = drive.grid.n
+        self.U = np.zeros((n, m))
+        self.A = np.zeros((n, m))
+        self.B = np.zeros((n, m))
+        self.L = np.zeros((n, drive.L.shape[0]))
+        self.st = np.zeros((n, K.N_STATE))
+        self.p = np.tile(drive._p, (n, 1))
+        self.target = np.zeros(n)
+        self.steps = np.zeros(n, dtype=np.int64)
+        self.act = np.zeros((n, 3))
+        self.out = np.zeros((n, K.N_OUT))
+        self.obs = np.zeros((n, EK.N_OBS))
+        self.extra = np.zeros((n, EK.N_X))
+        self.rngs = [seeding.np_random(None)[0] for _ in range(n)]
+        self._step_fn = EK.env_step_parallel if n >= PARALLEL_MIN_ENVS else EK.env_step_serial
+
+    def seed(self, seed=None):
+        """Env i gets seed + i (Gymnasium's convention); None draws fresh entropy."""
+        for i in range(self.num_envs):
+            self.rngs[i] = seeding.np_random(None if seed is None else seed + i)[0]
+
+    def reset(self, mask=None, options=None) -> None:
+        """Reset the envs where ``mask`` is True (all when None)."""
+        idx = range(self.num_envs) if mask is None else np.flatnonzero(mask)
+        for i in idx:
+            self.target[i] = sample_target(self.scene, self.rngs[i], options)
+            self.U[i] = 0.0
+            self.st[i] = 0.0
+            self.steps[i] = 0
+            self.extra[i] = 0.0
+            self.extra[i, EK.X_SAT] = 1.0
+            EK.reset_obs(i, self.sv, self.target, self.obs)
+
+    def step(self, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Advance every env one tick; returns (obs float32, rewards, truncated)."""
+        self.act[:] = check_actions(actions, (self.num_envs, 3))
+        self._step_fn(self.act, self.sv, self.target, self.steps, self.U, self.A, self.B,
+                      self.L, self.st, self.p, self.out, self.obs, self.extra, *self.features)
+        rewards = self.extra[:, EK.X_REWARD].copy()
+        if not np.all(np.isfinite(rewards)) or not np.all(np.isfinite(self.extra[:, EK.X_VS])):
+            raise FloatingPointError("non-finite state after a physics tick")
+        flags = self.st[:, K.ST_FLAG].astype(np.int64)
+        if np.any(flags & (K.FLAG_GRID | K.FLAG_NONFINITE)):
+            raise FloatingPointError(f"kernel error flags {np.unique(flags)}")
+        truncated = self.steps >= self.max_episode_steps
+        return self.obs.astype(np.float32), rewards, truncated
+
+    def info(self, i: int) -> dict:
+        return info_dict(self.extra[i], self.target[i])
+
+    def observation_space(self):
+        return spaces.Box(-EK.OBS_BOUND, EK.OBS_BOUND, (len(OBS_NAMES),), np.float32)
+
+
+# ----------------------------------------------------------------------------- Gymnasium
+def make_vector_env(num_envs: int = 1, max_episode_steps=None, **kwargs):
+    """``vector_entry_point`` of RollingDrive-v0 (``gym.make_vec(..., num_envs=N)``)."""
+    return RollingDriveVectorEnv(num_envs, max_episode_steps=max_episode_steps, **kwargs)
+
+
+def _gym_vector_base():
+    from gymnasium.vector import VectorEnv
+    return VectorEnv
+
+
+class RollingDriveVectorEnv(_gym_vector_base()):
+    """Gymnasium vector env over ``BatchCore`` with NEXT_STEP autoreset: the step after an
+    episode ends resets that env and returns its first observation, reward 0 and no flags."""
+
+    def __init__(self, num_envs: int = 1, max_episode_steps=None, render_mode=None, **kwargs):
+        from gymnasium.vector import AutoresetMode
+        from gymnasium.vector.utils import batch_space
+
+        if render_mode is not None:
+            raise ValueError("the batched env does not render; use a single env to look at it")
+        self.core = BatchCore(num_envs, max_episode_steps=max_episode_steps, **kwargs)
+        self.num_envs = self.core.num_envs
+        self.metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+        self.render_mode = None
+        self.single_observation_space = self.core.observation_space()
+        self.single_action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self._autoreset = np.zeros(self.num_envs, dtype=bool)
+
+    def reset(self, *, seed=None, options=None):
+        if seed is not None:
+            self.core.seed(seed)
+            self.action_space.seed(seed)
+        self.core.reset(None, options)
+        self._autoreset[:] = False
+        return self.core.obs.astype(np.float32), self._infos(np.ones(self.num_envs, bool))
+
+    def step(self, actions):
+        actions = np.asarray(actions, dtype=np.float64)
+        was_done = self._autoreset.copy()
+        obs, rew, trunc = self.core.step(np.where(was_done[:, None], 0.0, actions)
+                                         if was_done.any() else actions)
+        if was_done.any():
+            self.core.reset(was_done)  # the envs that ended last step start over instead
+            self.core.steps[was_done] = 0
+            obs = self.core.obs.astype(np.float32)
+            rew[was_done] = 0.0
+            trunc[was_done] = False
+        term = np.zeros(self.num_envs, dtype=bool)
+        self._autoreset = trunc | term
+        return obs, rew, term, trunc, self._infos(~was_done)
+
+    def _infos(self, mask) -> dict:
+        x = self.core.extra
+        return {"reward_track": np.where(mask, x[:, EK.X_TRACK], 0.0),
+                "reward_wear": np.where(mask, x[:, EK.X_WEAR], 0.0),
+                "xstar": x[:, EK.X_XS].copy(), "target": self.core.target.copy(),
+                "slip_work": np.where(mask, x[:, EK.X_SLIP], 0.0)}
+
+
+# ----------------------------------------------------------------------------- Stable-Baselines3
+def _sb3_vecenv_base():
+    from stable_baselines3.common.vec_env import VecEnv
+    return VecEnv
+
+
+class RollingDriveVecEnv(_sb3_vecenv_base()):
+    """SB3 ``VecEnv`` over ``BatchCore``: same-step autoreset; a finished env's last observation
+    is ``infos[i]["terminal_observation"]`` and ``infos[i]["TimeLimit.truncated"]`` is
+    ``truncated and not terminated``.  Wrap with ``VecMonitor`` for episode statistics.
+    Infos carry the reward terms of every env; the terminal keys only for those that ended."""
+
+    def __init__(self, num_envs: int = 1, scene="default", max_episode_steps=None, **overrides):
+        self.core = BatchCore(num_envs, scene=scene, max_episode_steps=max_episode_steps,
+                              **overrides)
+        self.render_mode = None  # set before the base class reads it
+        super().__init__(self.core.num_envs, self.core.observation_space(),
+                         spaces.Box(-1.0, 1.0, (3,), np.float32))
+        self._actions = None
+
+    def reset(self):
+        for i, s in enumerate(self._seeds):
+            if s is not None:
+                self.core.rngs[i] = seeding.np_random(s)[0]
+        opts = self._options[0] if self._options and self._options[0] else None
+        self.core.reset(None, opts)
+        self._reset_seeds()
+        self._reset_options()
+        self.reset_infos = [self.core.info(i) for i in range(self.num_envs)]
+        return self.core.obs.astype(np.float32)
+
+    def step_async(self, actions):
+        self._actions = actions
+
+    def step_wait(self):
+        obs, rew, trunc = self.core.step(self._actions)
+        x = self.core.extra
+        infos = [{"reward_track": x[i, EK.X_TRACK], "reward_wear": x[i, EK.X_WEAR]}
+                 for i in range(self.num_envs)]
+        if trunc.any():
+            ended = np.flatnonzero(trunc)
+            for i in ended:
+                infos[i]["terminal_observation"] = obs[i].copy()
+                infos[i]["TimeLimit.truncated"] = True
+            self.core.reset(trunc)
+            obs = self.core.obs.astype(np.float32)
+        return obs, rew.astype(np.float32), trunc.copy(), infos
+
+    def close(self):
+        pass
+
+    def get_attr(self, attr_name, indices=None):
+        if attr_name == "render_mode":
+            return [None for _ in self._get_indices(indices)]
+        target = self.core if hasattr(self.core, attr_name) else None
+        if target is None:
+            raise AttributeError(f"RollingDriveVecEnv has no attribute {attr_name!r}")
+        return [getattr(target, attr_name) for _ in self._get_indices(indices)]
+
+    def set_attr(self, attr_name, value, indices=None):
+        if not hasattr(self.core, attr_name):
+            raise AttributeError(f"RollingDriveVecEnv has no attribute {attr_name!r}")
+        setattr(self.core, attr_name, value)
+
+    def env_method(self, method_name, *method_args, indices=None, **method_kwargs):
+        fn = getattr(self.core, method_name)
+        return [fn(*method_args, **method_kwargs) for _ in self._get_indices(indices)]
+
+    def env_is_wrapped(self, wrapper_class, indices=None):
+        return [False for _ in self._get_indices(indices)]

@@ -1,0 +1,104 @@
+"""The natively batched env against N single envs: bit-identical transitions."""
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import rolling_env
+import rolling_env._envkernel
+from rolling_env.vector import BatchCore, RollingDriveVecEnv, RollingDriveVectorEnv
+
+N = 4
+STEPS = 40  # with max_episode_steps = 15: crosses two episode boundaries
+
+
+def _actions(seed, n=N, steps=STEPS):
+    return np.random.default_rng(seed).uniform(-1, 1, (steps, n, 3)).astype(np.float32)
+
+
+@pytest.mark.parametrize("scene", ["default", "resonant", "heavy_inf_friction", "loaded"])
+def test_gymnasium_vector_env_matches_single_envs(scene):
+    venv = gym.make_vec("RollingDrive-v0", num_envs=N, vectorization_mode="vector_entry_point",
+                        scene=scene, max_episode_steps=15)
+    singles = [gym.make("RollingDrive-v0", scene=scene, max_episode_steps=15) for _ in range(N)]
+    vobs, _ = venv.reset(seed=7)
+    sobs = np.stack([e.reset(seed=7 + i)[0] for i, e in enumerate(singles)])
+    assert np.array_equal(vobs, sobs), "reset observations differ"
+    done = np.zeros(N, bool)
+    for acts in _actions(1):
+        vobs, vrew, vterm, vtrunc, _ = venv.step(acts)
+        for i, e in enumerate(singles):
+            if done[i]:  # NEXT_STEP autoreset: this step resets env i
+                o, _ = e.reset()
+                r, te, tr = 0.0, False, False
+            else:
+                o, r, te, tr, _ = e.step(acts[i])
+            assert np.array_equal(vobs[i], o), f"obs of env {i} differ"
+            assert vrew[i] == r and vterm[i] == te and vtrunc[i] == tr, f"env {i} differs"
+        done = vterm | vtrunc
+    assert venv.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
+
+
+@pytest.mark.parametrize("scene", ["default", "light_stiff"])
+def test_sb3_vecenv_matches_single_envs(scene):
+    venv = RollingDriveVecEnv(N, scene=scene, max_episode_steps=15)
+    venv.seed(3)
+    vobs = venv.reset()
+    singles = [gym.make("RollingDrive-v0", scene=scene, max_episode_steps=15) for _ in range(N)]
+    sobs = np.stack([e.reset(seed=3 + i)[0] for i, e in enumerate(singles)])
+    assert np.array_equal(vobs, sobs)
+    for acts in _actions(2):
+        vobs, vrew, vdone, infos = venv.step(acts)
+        for i, e in enumerate(singles):
+            o, r, te, tr, info = e.step(acts[i])
+            assert np.float32(r) == vrew[i] and vdone[i] == (te or tr)
+            assert info["reward_track"] == infos[i]["reward_track"]
+            if te or tr:  # SAME_STEP: terminal obs in info, reset obs returned
+                assert np.array_equal(infos[i]["terminal_observation"], o)
+                assert infos[i]["TimeLimit.truncated"] == (tr and not te)
+                o, _ = e.reset()
+            assert np.array_equal(vobs[i], o), f"obs of env {i} differ"
+
+
+def test_reset_mask_resets_only_masked():
+    core = BatchCore(3, max_episode_steps=100)
+    core.seed(0)
+    core.reset()
+    for _ in range(5):
+        core.step(np.full((3, 3), 0.5))
+    before = core.st.copy()
+    core.reset(np.array([False, True, False]))
+    assert np.array_equal(core.st[0], before[0]) and np.array_equal(core.st[2], before[2])
+    assert np.all(core.st[1] == 0.0) and core.steps[1] == 0 and core.steps[0] == 5
+
+
+def test_parallel_kernel_equals_serial():
+    a, b = BatchCore(70), BatchCore(70)  # 70 >= PARALLEL_MIN_ENVS: threaded kernel
+    assert a._step_fn is rolling_env._envkernel.env_step_parallel
+    b._step_fn = rolling_env._envkernel.env_step_serial
+    a.seed(1), b.seed(1)
+    a.reset(), b.reset()
+    for acts in _actions(4, n=70, steps=10):
+        oa, ra, _ = a.step(acts)
+        ob, rb, _ = b.step(acts)
+        assert np.array_equal(oa, ob) and np.array_equal(ra, rb)
+
+
+def test_bad_batch_actions_raise():
+    core = BatchCore(2)
+    core.reset()
+    with pytest.raises(ValueError, match="action"):
+        core.step(np.full((2, 3), np.nan))
+    with pytest.raises(ValueError, match="shape"):
+        core.step(np.zeros((3, 3)))
+
+
+def test_sb3_trains_on_batched_env():
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_checker import check_env  # noqa: F401
+    from stable_baselines3.common.vec_env import VecCheckNan, VecMonitor
+    venv = VecCheckNan(VecMonitor(RollingDriveVecEnv(8, max_episode_steps=64)), raise_exception=True)
+    model = PPO("MlpPolicy", venv, n_steps=32, batch_size=64, n_epochs=1, seed=0, device="cpu")
+    model.learn(512)
+    assert model.num_timesteps >= 512
