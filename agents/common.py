@@ -3,10 +3,11 @@ from __future__ import annotations
 
 import ast
 import os
-import tempfile
 from pathlib import Path
 
 import yaml
+
+from rolling_env.io import atomic_write  # noqa: F401  (re-exported)
 
 REPO = Path(__file__).resolve().parent.parent
 CONF_DIR = REPO / "configs" / "hyperparams"
@@ -55,23 +56,6 @@ def make_vec_env(scene, n_envs: int, seed: int, env_kwargs: dict | None = None):
     venv = VecMonitor(RollingDriveVecEnv(n_envs, scene=scene, **kw))
     venv.seed(seed)
     return venv
-
-
-def atomic_write(path: str | os.PathLike, writer) -> Path:
-    """Call ``writer(tmp_path)`` on a temporary file beside ``path``, then rename it into
-    place: the file is either the old one or the complete new one, never half written."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
-    os.close(fd)
-    try:
-        writer(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
 
 
 def save_model(model, vecnorm, folder: str | os.PathLike, name: str = "model") -> Path:

@@ -7,11 +7,13 @@ the two trivial ones here.
 from __future__ import annotations
 
 import csv
+import io
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from .io import atomic_write, write_text
 
 COLUMNS = ("step", "t", "target", "xstar", "vstar", "error", "N", "T", "omega_R", "v",
            "stick_fraction", "slip_work", "reward", "reward_track", "reward_wear", "saturated",
@@ -67,20 +69,12 @@ def rollout(env, controller, *, seed=0, target=None, max_steps=None) -> dict:
 
 def write_csv(data: dict, path: str | os.PathLike) -> Path:
     """Write the per-step columns atomically (temp file + rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(COLUMNS)
-            for i in range(len(data["step"])):
-                w.writerow([repr(float(data[c][i])) for c in COLUMNS])
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
-    return path
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(COLUMNS)
+    for i in range(len(data["step"])):
+        w.writerow([repr(float(data[c][i])) for c in COLUMNS])
+    return write_text(path, buf.getvalue())
 
 
 def plot(data: dict, path: str | os.PathLike, title: str = "") -> Path:
@@ -108,14 +102,8 @@ def plot(data: dict, path: str | os.PathLike, title: str = "") -> Path:
     ax[2].set_xlabel("t [ms]")
     ax[2].legend(ncol=3)
     fig.tight_layout()
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".png")
-    os.close(fd)
     try:
-        fig.savefig(tmp, dpi=100)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
+        atomic_write(path, lambda p: fig.savefig(p, dpi=100, format="png"))
     finally:
         plt.close(fig)
     return path
