@@ -50,9 +50,10 @@ class Geometry:
         return self.g_over_e * self.E_star
 
 
-def _drive(wave: SquareWave, geo: Geometry, params: DriveParams, resolution: float) -> Drive:
+def _drive(wave: SquareWave, geo: Geometry, params: DriveParams, resolution: float,
+           grid_offset: float = 0.0) -> Drive:
     return Drive(params, a_ref=wave.a1, resolution=resolution, stroke=wave.stroke,
-                 a_max=wave.a1, t_ref=wave.tau)
+                 a_max=wave.a1, t_ref=wave.tau, grid_offset=grid_offset)
 
 
 def _check_common(delta, eps, w, resolution):
@@ -63,11 +64,11 @@ def _check_common(delta, eps, w, resolution):
 
 
 def period_impulse(delta, eps, w, vstar_ratio, *, resolution=DEFAULT_RESOLUTION, periods=3,
-                   geo: Geometry = Geometry(), ticks_per_half=1, n_sub=1):
+                   geo: Geometry = Geometry(), ticks_per_half=1, n_sub=1, grid_offset=0.0):
     """Impulse of T over the last of ``periods`` periods with a prescribed runner
     (infinite friction), normalised as I / (2 G* a1^2 tau) (paper Fig. 8)."""
     wave = SquareWave(delta, eps, w, geo.a1, geo.R, geo.tau)
-    drv = _drive(wave, geo, DriveParams(geo.R, geo.E_star, geo.G_star), resolution)
+    drv = _drive(wave, geo, DriveParams(geo.R, geo.E_star, geo.G_star), resolution, grid_offset)
     drv.reset()
     d, u, v = wave.ticks(periods, ticks_per_half)
     out = drv.run(dt_tick=wave.dt_tick(ticks_per_half), n_sub=n_sub, omega_R=u, v=v, d=d,
@@ -78,7 +79,7 @@ def period_impulse(delta, eps, w, vstar_ratio, *, resolution=DEFAULT_RESOLUTION,
 
 
 def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
-                  geo: Geometry = Geometry()):
+                  geo: Geometry = Geometry(), grid_offset=0.0):
     """Simulated working point v*/(omega R): the zero of the period impulse (Eq. 31).
 
     With infinite friction and a prescribed runner the impulse is affine in v*, so two runs
@@ -86,8 +87,9 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
     ``eq29``, ``rel_error`` and ``seconds``."""
     _check_common(delta, eps, w, resolution)
     t0 = time.perf_counter()
-    i0 = period_impulse(delta, eps, w, 0.0, resolution=resolution, periods=periods, geo=geo)
-    i1 = period_impulse(delta, eps, w, 0.1, resolution=resolution, periods=periods, geo=geo)
+    kw = dict(resolution=resolution, periods=periods, geo=geo, grid_offset=grid_offset)
+    i0 = period_impulse(delta, eps, w, 0.0, **kw)
+    i1 = period_impulse(delta, eps, w, 0.1, **kw)
     sim = -0.1 * i0 / (i1 - i0)
     seconds = time.perf_counter() - t0
     eq32 = float(analytic.eq32(delta, eps, w)) if w >= 2 else None

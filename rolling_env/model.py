@@ -65,6 +65,7 @@ class Grid:
     c_max: float
     a_max: float
     dx: float
+    offset: float = 0.0  # shift of the cells by this fraction of dx (grid-alignment studies)
     x_lo: float = field(init=False)
     n: int = field(init=False)
 
@@ -75,7 +76,8 @@ class Grid:
         # a whole number of cells, centred on the stroke: mirrored strokes give mirrored grids
         width = self.c_max - self.c_min + 2.0 * (self.a_max + 2.0 * self.dx)
         self.n = int(math.ceil(width / self.dx))
-        self.x_lo = 0.5 * (self.c_min + self.c_max) - 0.5 * self.n * self.dx
+        self.n += 1 if self.offset else 0
+        self.x_lo = 0.5 * (self.c_min + self.c_max) - 0.5 * self.n * self.dx + self.offset * self.dx
 
 
 class Drive:
@@ -95,10 +97,13 @@ class Drive:
         Largest contact half-width that will occur [m].
     t_ref : float
         Time scale [s] used inside the kernel (the nominal excitation period is a good choice).
+    grid_offset : float
+        Shift of the cells by this fraction of a cell (to measure grid-alignment effects).
     """
 
     def __init__(self, params: DriveParams, *, a_ref: float, resolution: float,
-                 stroke: tuple[float, float], a_max: float, t_ref: float):
+                 stroke: tuple[float, float], a_max: float, t_ref: float,
+                 grid_offset: float = 0.0):
         check_range("a_ref", a_ref, 0.0, _INF, lo_open=True, hi_open=True)
         check_range("resolution", resolution, 0.5, 1e5)
         check_range("a_max", a_max, 0.0, _INF, lo_open=True, hi_open=True)
@@ -110,7 +115,9 @@ class Drive:
         self.M0 = params.G_star * self.L0 * self.t0 ** 2
         self.W0 = self.F0 * self.L0
         dx = a_ref / resolution
-        self.grid = Grid(stroke[0] / self.L0, stroke[1] / self.L0, a_max / self.L0, dx / self.L0)
+        check_range("grid_offset", grid_offset, -1.0, 1.0)
+        self.grid = Grid(stroke[0] / self.L0, stroke[1] / self.L0, a_max / self.L0, dx / self.L0,
+                         grid_offset)
         n = self.grid.n
         if n > 20_000_000:
             raise ValueError(f"the spring row would need {n} cells: lower resolution or stroke")
