@@ -29,6 +29,10 @@ def _sim_case(name, delta, eps, w, r, mu=math.inf, periods=20, **kw):
                      ("mean_v_star_over_omega_R", "slip_work", "energy_residual"))
         eq = res["eq32"]
         outcome = f"v*/(omega R) {res['mean_v_star_over_omega_R']:.4g}"
+        if 0 < r <= 0.01:
+            outcome = "heavy runner still accelerating (relaxation time ~ 1/r^2 >> run): " + outcome
+        elif r >= 2:
+            outcome = "runner follows the sphere, drive collapses: " + outcome
         if eq is not None:
             outcome += f" (Eq. 32 {eq:.4g})"
         if math.isfinite(mu):

@@ -1,0 +1,232 @@
+"""Benchmarks that print numbers, as ratios against references measured in the same run.
+
+* kernel throughput per scene in cell updates per second (cells in contact x sub-steps / s),
+  against a rough machine limit;
+* single env steps/s through ``gym.make`` vs Gymnasium's Pendulum-v1, measured the same way;
+* the naive plain-numpy spring row (tests/naive.py) at equal working-point accuracy;
+* scene specialisation: the scene's kernel vs the same kernel with every feature switched on;
+* batched env (256 envs) vs the single env, serial and threaded kernel;
+* start-up (warm and cold numba cache) and peak memory (1 env, 1024 batched envs).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+CPU_HZ_GUESS = 3.0e9
+FLOPS_PER_CELL = 40  # rough: overlap + creep (A, B) + friction limit + ~2 Newton passes + commit
+
+
+def _steps_per_second(env, n, seed=0):
+    acts = np.random.default_rng(seed).uniform(-1, 1, (n, 3)).astype(np.float32)
+    env.reset(seed=seed)
+    for a in acts[: min(1000, n)]:
+        env.step(a)
+    t = time.perf_counter()
+    for a in acts:
+        _, _, te, tr, _ = env.step(a)
+        if te or tr:
+            env.reset()
+    return n / (time.perf_counter() - t)
+
+
+def env_vs_pendulum(n=50_000, scenes=None):
+    import gymnasium as gym
+    import rolling_env
+    pend = _steps_per_second(gym.make("Pendulum-v1"), n)
+    rows = []
+    for sc in scenes or rolling_env.list_scenes():
+        r = _steps_per_second(gym.make("RollingDrive-v0", scene=sc), n)
+        rows.append(dict(scene=sc, steps_per_s=r, pendulum=pend, ratio=r / pend))
+    return rows
+
+
+def _core_rate(core, ticks, seed=0):
+    acts = np.random.default_rng(seed).uniform(-1, 1, (ticks, core.num_envs, 3))
+    core.seed(seed)
+    core.reset()
+    for a in acts[:20]:
+        core.step(a)
+    t = time.perf_counter()
+    cells = 0.0
+    sc = core.scene
+    for a in acts:
+        core.step(a)
+        N = sc.N_min + 0.5 * (a[:, 0] + 1) * (sc.N_max - sc.N_min)
+        d = (3 * N / (4 * sc.E_star * math.sqrt(sc.R))) ** (2 / 3)
+        cells += np.sum(2 * np.sqrt(sc.R * d) / (core.a_max / sc.resolution) + 2)
+        tr = core.steps >= core.max_episode_steps
+        if tr.any():
+            core.reset(tr)
+    sec = time.perf_counter() - t
+    return ticks * core.num_envs / sec, cells * sc.sub_steps / sec
+
+
+def kernel_throughput(ticks=20_000, scenes=None):
+    import rolling_env
+    from .vector import BatchCore
+    limit = CPU_HZ_GUESS / FLOPS_PER_CELL
+    rows = []
+    for sc in scenes or rolling_env.list_scenes():
+        core = BatchCore(64, scene=sc, max_episode_steps=10**9)
+        core._step_fn = __import__("rolling_env._envkernel", fromlist=["x"]).env_step_serial
+        steps, cells = _core_rate(core, max(ticks // 64, 50))
+        rows.append(dict(scene=sc, cell_updates_per_s=cells, limit=limit, fraction=cells / limit,
+                         env_steps_per_s=steps))
+    return rows
+
+
+def specialisation(ticks=300, scenes=None):
+    """Scene kernel vs the same kernel with friction (mu 1e30), dynamics and load (0.0) on."""
+    import rolling_env
+    from .vector import BatchCore
+    rows = []
+    for sc in scenes or rolling_env.list_scenes():
+        spec = BatchCore(64, scene=sc, max_episode_steps=10**9)
+        full = BatchCore(64, scene=sc, max_episode_steps=10**9)
+        mu, mass, load = full.features
+        full.features = (1e30 if mu is None else mu, mass, 0.0 if load is None else load)
+        if full.L.shape[1] == 1:
+            full.L = np.zeros_like(full.U)
+        for c in (spec, full):
+            c._step_fn = __import__("rolling_env._envkernel", fromlist=["x"]).env_step_serial
+        r_spec, _ = _core_rate(spec, ticks)
+        r_full, _ = _core_rate(full, ticks)
+        rows.append(dict(scene=sc, specialised=r_spec, all_features=r_full,
+                         speedup=r_spec / r_full))
+    return rows
+
+
+def batched(n_envs=256, ticks=200, single_rate=None):
+    from . import _envkernel as EK
+    from .vector import BatchCore
+    out = {}
+    for name, fn in (("serial", EK.env_step_serial), ("threaded", EK.env_step_parallel)):
+        core = BatchCore(n_envs, max_episode_steps=10**9)
+        core._step_fn = fn
+        out[name], _ = _core_rate(core, ticks)
+    out["single"] = single_rate
+    return out
+
+
+def naive_equal_accuracy():
+    """Working point (0.7, 0.1, 2.5): ours at 8 springs/a1 (worst-case error 6.6e-3 over grid
+    alignments) vs the naive row at 64 springs/a1 (1.1e-2): ours is the more accurate."""
+    from . import analytic
+    from . import experiments as ex
+    from .converge import _best_time, _naive_module
+    naive = _naive_module()
+    if naive is None:
+        return None
+    case = (0.7, 0.1, 2.5)
+    ref = analytic.eq32(*case)
+    r, t_ours = _best_time(lambda: ex.working_point(*case, resolution=8), 5)
+    v, t_naive = _best_time(lambda: naive.working_point(*case, 64), 1)
+    return dict(ours_seconds=t_ours, ours_error=abs(r["simulated"] - ref) / ref,
+                naive_seconds=t_naive, naive_error=abs(v - ref) / ref, speedup=t_naive / t_ours)
+
+
+_STARTUP = ("import time; t = time.perf_counter(); import gymnasium as gym, rolling_env; "
+            "e = gym.make('RollingDrive-v0'); e.reset(seed=0); e.step(e.action_space.sample()); "
+            "print(time.perf_counter() - t)")
+_MEMORY = ("import resource, numpy as np, rolling_env, gymnasium as gym; "
+           "from rolling_env.vector import BatchCore; n = {n}; "
+           "base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; "
+           "x = gym.make('RollingDrive-v0') if n == 1 else BatchCore(n); "
+           "(x.reset(seed=0), x.step(x.action_space.sample())) if n == 1 else "
+           "(x.reset(), x.step(np.zeros((n, 3)))); "
+           "arrs = [x.unwrapped.drive.U, x.unwrapped.drive.A, x.unwrapped.drive.B, "
+           "x.unwrapped.drive.L, x.unwrapped.drive.st] if n == 1 else "
+           "[x.U, x.A, x.B, x.L, x.st, x.p, x.obs, x.out, x.extra]; "
+           "print(base, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, "
+           "sum(a.nbytes for a in arrs))")
+
+
+def startup_and_memory():
+    env = dict(os.environ)
+    warm = float(subprocess.run([sys.executable, "-c", _STARTUP], capture_output=True,
+                                text=True, check=True, env=env).stdout)
+    with tempfile.TemporaryDirectory() as d:
+        cold_env = dict(env, NUMBA_CACHE_DIR=d)
+        cold = float(subprocess.run([sys.executable, "-c", _STARTUP], capture_output=True,
+                                    text=True, check=True, env=cold_env).stdout)
+    mem = {}
+    for n in (1, 1024):
+        base, peak, state = map(int, subprocess.run(
+            [sys.executable, "-c", _MEMORY.format(n=n)], capture_output=True, text=True,
+            check=True, env=env).stdout.split())
+        mem[n] = dict(peak_mib=peak / 1024, above_imports_mib=(peak - base) / 1024,
+                      state_mib=state / 2 ** 20)
+    return dict(warm_seconds=warm, cold_seconds=cold, memory=mem)
+
+
+def run(quick=False) -> dict:
+    scenes = ["default", "heavy_inf_friction"] if quick else None
+    res = {"env": env_vs_pendulum(10_000 if quick else 50_000, scenes),
+           "kernel": kernel_throughput(2_000 if quick else 20_000, scenes),
+           "specialisation": specialisation(50 if quick else 300, scenes)}
+    single = next(r["steps_per_s"] for r in res["env"] if r["scene"] == "default")
+    res["batched"] = batched(64 if quick else 256, 50 if quick else 200, single)
+    res["naive"] = naive_equal_accuracy()
+    res["startup"] = startup_and_memory()
+    return res
+
+
+def report(res) -> str:
+    L = ["# Benchmarks", "",
+         "Generated by `rolling-drive bench` on this project's 2-core CPU machine (no GPU); "
+         "every ratio compares numbers measured in the same run.", "",
+         "## Single env through gym.make (pre-sampled actions) vs Pendulum-v1", "",
+         "| scene | steps/s | Pendulum-v1 steps/s | ratio (target >= 0.3) |", "|---|---|---|---|"]
+    L += [f"| {r['scene']} | {r['steps_per_s']:,.0f} | {r['pendulum']:,.0f} | {r['ratio']:.2f} |"
+          for r in res["env"]]
+    L += ["", "## Kernel throughput (64 envs, serial kernel, random actions)", "",
+          f"Machine limit estimate: {CPU_HZ_GUESS / 1e9:g} GHz x 1 flop/cycle (scalar code with "
+          f"branches) / ~{FLOPS_PER_CELL} flops per cell update (overlap, creep coefficients, "
+          "friction limit, ~2 Newton passes, commit) = "
+          f"{CPU_HZ_GUESS / FLOPS_PER_CELL / 1e6:.0f} M cell updates/s per core.", "",
+          "| scene | cell updates/s | fraction of limit | env steps/s |", "|---|---|---|---|"]
+    L += [f"| {r['scene']} | {r['cell_updates_per_s'] / 1e6:.1f} M | {r['fraction']:.2f} | "
+          f"{r['env_steps_per_s']:,.0f} |" for r in res["kernel"]]
+    L += ["", "## Scene specialisation (env steps/s, 64 envs, serial)", "",
+          "| scene | specialised kernel | every feature on | speed-up |", "|---|---|---|---|"]
+    L += [f"| {r['scene']} | {r['specialised']:,.0f} | {r['all_features']:,.0f} | "
+          f"{r['speedup']:.2f}x |" for r in res["specialisation"]]
+    b = res["batched"]
+    L += ["", "## Batched env vs single env (default scene)", "",
+          "| | env steps/s | vs single env |", "|---|---|---|",
+          f"| single env (gym.make) | {b['single']:,.0f} | 1.0x |",
+          f"| batched, serial kernel | {b['serial']:,.0f} | {b['serial'] / b['single']:.1f}x |",
+          f"| batched, threaded kernel (prange, 2 cores) | {b['threaded']:,.0f} | "
+          f"{b['threaded'] / b['single']:.1f}x |"]
+    n = res["naive"]
+    if n:
+        L += ["", "## Naive plain-numpy spring row at equal accuracy (working point 0.7, 0.1, 2.5)",
+              "", "| kernel | resolution | rel. error vs Eq. 32 | seconds | ", "|---|---|---|---|",
+              f"| ours | 8 springs/a1 | {n['ours_error']:.1e} | {n['ours_seconds']:.2e} |",
+              f"| naive (tests/naive.py) | 64 springs/a1 | {n['naive_error']:.1e} | "
+              f"{n['naive_seconds']:.2e} |", "",
+              f"Speed-up at (better than) equal accuracy: {n['speedup']:.0f}x (target >= 100x)."]
+    s = res["startup"]
+    L += ["", "## Start-up and memory", "",
+          f"- import + gym.make + first step, warm numba cache: {s['warm_seconds']:.2f} s "
+          "(target < 3 s)",
+          f"- the same with an empty numba cache (cold, compiles): {s['cold_seconds']:.1f} s",
+          f"- peak RSS of the process, one env: {s['memory'][1]['peak_mib']:.0f} MiB "
+          f"(state arrays {s['memory'][1]['state_mib']:.3f} MiB; the rest is Python, numpy, "
+          "numba/LLVM and Gymnasium)",
+          f"- peak RSS, batched env with 1024 envs: {s['memory'][1024]['peak_mib']:.0f} MiB "
+          f"(state arrays {s['memory'][1024]['state_mib']:.1f} MiB, "
+          f"{s['memory'][1024]['above_imports_mib']:.1f} MiB above the imports)"]
+    return "\n".join(L) + "\n"
+
+
+def main_json(res) -> str:
+    return json.dumps(res, default=float)
