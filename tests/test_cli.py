@@ -1,0 +1,59 @@
+"""The command line: JSON keys, numbers against the analytic results, clear errors with exit 2."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from rolling_env import analytic
+from rolling_env.cli import main
+
+
+def _json(capsys, *argv):
+    assert main(list(argv)) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_working_point_json(capsys):
+    r = _json(capsys, "working-point", "--delta", "0.7", "--eps", "0.1", "--w", "2.5", "--json")
+    assert {"simulated", "eq32", "eq29", "rel_error", "seconds"} <= set(r)
+    assert abs(r["eq32"] - analytic.eq32(0.7, 0.1, 2.5)) < 1e-15
+    assert r["rel_error"] < 1e-3, "default resolution should give about 0.1% or better"
+
+
+def test_simulate_json(capsys):
+    r = _json(capsys, "simulate", "--delta", "0.7", "--eps", "0.995", "--w", "2.5",
+              "--omega-n-ratio", "0.3", "--mu", "0.3", "--periods", "6", "--resolution", "16",
+              "--json")
+    assert {"mean_v_star_over_omega_R", "slip_work", "energy_residual", "seconds"} <= set(r)
+    assert r["slip_work"] > 0 and abs(r["energy_residual"]) < 0.05
+
+
+def test_mindlin_json(capsys):
+    r = _json(capsys, "mindlin", "--mu", "0.3", "--points", "11", "--json")
+    assert len(r["u_over_ustar"]) == len(r["T_over_muN"]) == len(r["analytic"]) == 11
+    assert max(abs(a - b) for a, b in zip(r["T_over_muN"], r["analytic"])) < 2e-3
+
+
+@pytest.mark.parametrize("argv,name", [
+    (["working-point", "--delta", "1.5", "--eps", "0.1", "--w", "2.5"], "delta"),
+    (["working-point", "--delta", "0.7", "--eps", "nan", "--w", "2.5"], "eps"),
+    (["working-point", "--delta", "0.7", "--eps", "0.1", "--w", "0"], "w"),
+    (["simulate", "--delta", "0.7", "--eps", "0.1", "--w", "2.5", "--omega-n-ratio", "1",
+      "--mu", "-1"], "mu"),
+    (["mindlin", "--mu", "0.3", "--points", "1"], "points"),
+])
+def test_bad_arguments_exit_2_naming_the_parameter(argv, name, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert name in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_console_script_help():
+    out = subprocess.run([sys.executable, "-m", "rolling_env", "simulate", "--help"],
+                         capture_output=True, text=True)
+    assert out.returncode == 0 and "--omega-n-ratio" in out.stdout
