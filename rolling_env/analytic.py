@@ -1,28 +1,39 @@
 """Analytic reference results of the drive (paper Eqs. 1-3, 27-29, 32; Cattaneo-Mindlin).
 
-All functions take scalars or numpy arrays (broadcast), SI units, and reject out-of-range
-input with a ``ValueError`` naming the parameter and its range.
+Names follow the paper: sphere radius R [m], effective moduli E_star, G_star [Pa], friction
+coefficient mu, delta = d2/d1 (back/forth indentation), eps = v/(omega R) (translation over
+rolling velocity), w = W/a1 (rolling amplitude over the forth contact radius).  Every function
+takes scalars or numpy arrays (broadcast), returns a float for scalar input and an ndarray
+otherwise, and rejects out-of-range input (NaN and inf included) with a ``ValueError`` that
+names the parameter and its allowed range.
 """
 from __future__ import annotations
 
 import numpy as np
 
+_TOL = 1e-12  # rounding slack when a target ratio sits on the edge of its reachable range
 
-def _arr(name, x, lo=-np.inf, hi=np.inf, lo_open=False, hi_open=False, allow_inf=False):
+
+# ----------------------------------------------------------------------------- validation
+def _arr(name, x, lo=-np.inf, hi=np.inf, lo_open=False, hi_open=False):
+    """``x`` as a float64 array, checked to be finite and in the interval [lo, hi]
+    (ends open where asked)."""
     a = np.asarray(x, dtype=np.float64)
-    if np.any(np.isnan(a)):
-        raise ValueError(f"{name} must not be NaN")
-    if not allow_inf and np.any(np.isinf(a)):
-        raise ValueError(f"{name} must be finite")
-    bad = (a < lo) | (a > hi)
+    bad = ~np.isfinite(a) | (a < lo) | (a > hi)
     if lo_open:
         bad |= a == lo
     if hi_open:
         bad |= a == hi
     if np.any(bad):
-        lb, rb = ("(" if lo_open else "["), (")" if hi_open else "]")
-        raise ValueError(f"{name} must be in {lb}{lo:g}, {hi:g}{rb}, got {a[bad].ravel()[0]!r}")
+        rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+        what = "finite" if np.isinf(lo) and np.isinf(hi) else f"finite and in {rng}"
+        raise ValueError(f"{name} must be {what}, got {a[bad].ravel()[0]!r}")
     return a
+
+
+def _pos(name, x):
+    """``x`` checked to be in (0, inf)."""
+    return _arr(name, x, 0.0, np.inf, lo_open=True)
 
 
 def _out(a):
@@ -31,12 +42,12 @@ def _out(a):
 
 # ----------------------------------------------------------------------------- materials
 def effective_moduli(E1, nu1, E2, nu2):
-    """Eq. 1: (E*, G*) [Pa] of two elastic bodies (Young moduli E [Pa], Poisson ratios nu):
-    1/E* = (1-nu1^2)/E1 + (1-nu2^2)/E2,  1/G* = (2-nu1)/(4 G1) + (2-nu2)/(4 G2)."""
-    E1 = _arr("E1", E1, 0, np.inf, lo_open=True)
-    E2 = _arr("E2", E2, 0, np.inf, lo_open=True)
-    nu1 = _arr("nu1", nu1, 0, 0.5)
-    nu2 = _arr("nu2", nu2, 0, 0.5)
+    """Eq. 1: (E_star, G_star) [Pa] of two elastic bodies, Young moduli E1, E2 > 0 [Pa] and
+    Poisson ratios nu1, nu2 in [0, 0.5]:
+    1/E* = (1-nu1^2)/E1 + (1-nu2^2)/E2,  1/G* = (2-nu1)/(4 G1) + (2-nu2)/(4 G2),
+    G_i = E_i / (2 (1 + nu_i))."""
+    E1, E2 = _pos("E1", E1), _pos("E2", E2)
+    nu1, nu2 = _arr("nu1", nu1, 0, 0.5), _arr("nu2", nu2, 0, 0.5)
     G1, G2 = E1 / (2 * (1 + nu1)), E2 / (2 * (1 + nu2))
     E_star = 1 / ((1 - nu1 ** 2) / E1 + (1 - nu2 ** 2) / E2)
     G_star = 1 / ((2 - nu1) / (4 * G1) + (2 - nu2) / (4 * G2))
@@ -44,89 +55,90 @@ def effective_moduli(E1, nu1, E2, nu2):
 
 
 def g_over_e(nu):
-    """G*/E* for two bodies of one material with Poisson ratio nu: 2(1-nu)/(2-nu)."""
+    """G*/E* = 2(1-nu)/(2-nu) for two bodies of one material, nu in [0, 0.5]
+    (0.8235 for nu = 0.3)."""
     nu = _arr("nu", nu, 0, 0.5)
     return _out(2 * (1 - nu) / (2 - nu))
 
 
 # ----------------------------------------------------------------------------- Hertz
 def hertz_indentation(N, R, E_star):
-    """Eq. 2: indentation d [m] = (3 N / (4 E* sqrt(R)))^(2/3) for normal force N [N]."""
+    """Eq. 2: indentation d [m] = (3 N / (4 E* sqrt(R)))^(2/3); N >= 0 [N], R > 0 [m],
+    E_star > 0 [Pa]."""
     N = _arr("N", N, 0)
-    R = _arr("R", R, 0, np.inf, lo_open=True)
-    E_star = _arr("E_star", E_star, 0, np.inf, lo_open=True)
+    R, E_star = _pos("R", R), _pos("E_star", E_star)
     return _out((3 * N / (4 * E_star * np.sqrt(R))) ** (2 / 3))
 
 
 def hertz_force(d, R, E_star):
-    """Normal force N [N] = 4/3 E* sqrt(R) d^(3/2) for indentation d [m]."""
+    """Normal force N [N] = 4/3 E* sqrt(R) d^(3/2); d >= 0 [m], R > 0 [m], E_star > 0 [Pa]."""
     d = _arr("d", d, 0)
-    R = _arr("R", R, 0, np.inf, lo_open=True)
-    E_star = _arr("E_star", E_star, 0, np.inf, lo_open=True)
+    R, E_star = _pos("R", R), _pos("E_star", E_star)
     return _out(4 / 3 * E_star * np.sqrt(R) * d ** 1.5)
 
 
 def contact_radius(d, R):
-    """Eq. 3: contact radius a [m] = sqrt(R d)."""
-    d = _arr("d", d, 0)
-    R = _arr("R", R, 0, np.inf, lo_open=True)
-    return _out(np.sqrt(R * d))
+    """Eq. 3: contact radius a [m] = sqrt(R d); d >= 0 [m], R > 0 [m]."""
+    return _out(np.sqrt(_pos("R", R) * _arr("d", d, 0)))
 
 
 def tangential_stiffness(a, G_star):
-    """Stiffness of a stuck contact of radius a [m]: 2 a G* [N/m]."""
-    return _out(2 * _arr("a", a, 0) * _arr("G_star", G_star, 0, np.inf, lo_open=True))
+    """Stiffness 2 a G* [N/m] of a stuck contact of radius a >= 0 [m], G_star > 0 [Pa]."""
+    return _out(2 * _arr("a", a, 0) * _pos("G_star", G_star))
 
 
 def natural_frequency(a1, G_star, m):
-    """omega_n = sqrt(2 a1 G* / m) [rad/s] of a runner of mass m [kg] on the stuck contact."""
+    """omega_n = sqrt(2 a1 G* / m) [rad/s] of a runner of mass m > 0 [kg] on the stuck
+    contact of radius a1 [m]."""
     k = tangential_stiffness(a1, G_star)
-    m = _arr("m", m, 0, np.inf, lo_open=True)
-    return _out(np.sqrt(k / m))
+    return _out(np.sqrt(k / _pos("m", m)))
 
 
 # ----------------------------------------------------------------------------- working points
 def steady_forces(delta, eps, vstar_ratio, a1, G_star):
-    """Eqs. 27-28: steady rolling forces [N] of the forth and back steps,
-    T1 = 2 G* a1^2 (1 - eps - V), T2 = 2 G* a2^2 (-1 + eps - V), a2^2 = delta a1^2,
-    V = v*/(omega R)."""
-    delta = _arr("delta", delta, 0, 1)
-    eps = _arr("eps", eps)
+    """Eqs. 27-28: steady rolling forces [N] on the runner in the forth and back steps,
+    T1 = 2 G* a1^2 (1 - eps - V),  T2 = 2 G* a2^2 (-1 + eps - V),  a2^2 = delta a1^2,
+    with V = vstar_ratio = v*/(omega R), a1 >= 0 [m], G_star > 0 [Pa], delta in [0, 1]."""
+    delta, eps = _arr("delta", delta, 0, 1), _arr("eps", eps)
     V = _arr("vstar_ratio", vstar_ratio)
-    a1 = _arr("a1", a1, 0)
-    G_star = _arr("G_star", G_star, 0, np.inf, lo_open=True)
-    T1 = 2 * G_star * a1 ** 2 * (1 - eps - V)
-    T2 = 2 * G_star * delta * a1 ** 2 * (-1 + eps - V)
-    return _out(T1), _out(T2)
+    scale = 2 * _pos("G_star", G_star) * _arr("a1", a1, 0) ** 2
+    return _out(scale * (1 - eps - V)), _out(scale * delta * (-1 + eps - V))
 
 
 def eq29(delta, eps):
-    """Eq. 29 (= Eq. 11): v*/(omega R) = (1 - eps)(1 - delta)/(1 + delta), steady rolling
-    (large amplitude)."""
-    delta = _arr("delta", delta, 0, 1)
-    eps = _arr("eps", eps)
+    """Eq. 29 (= Eq. 11), steady rolling (large amplitude):
+    v*/(omega R) = (1 - eps)(1 - delta)/(1 + delta); delta in [0, 1], eps finite."""
+    delta, eps = _arr("delta", delta, 0, 1), _arr("eps", eps)
     return _out((1 - eps) * (1 - delta) / (1 + delta))
 
 
 def impulse_coefficients(delta, w):
-    """(P, Q) with the period impulse I = (1 - eps) P - V Q in units of G* a1^3/(omega R).
+    """(P, Q) of the period impulse I = (1 - eps) P - V Q of the runner force, V = v*/(omega R),
+    in units of G* a1^2 * (a1 / (omega R)) [N s]; delta in [0, 1], w >= 1 + sqrt(delta).
 
-    Derivation (physics.md kinematics, a1 = omega R = 1, b = sqrt(delta)): with creep rates
-    s1 = (1-eps) - V (forth) and s2 = -(1-eps) - V (back), I = s1 C1 + s2 C2 where
-    C1 = 2w - 4/3 + 2 b^2 + 2/3 b^3 (time-in-contact integral of the forth step plus the forth
-    deflection the back step carries) and C2 = 2 b^2 w + 2 b^2 - 2/3 b^3; hence
-    P = C1 - C2 = 2w(1-delta) - 4/3(1 - delta^1.5), Q = C1 + C2 = 2w(1+delta) - 4/3 + 4 delta,
-    valid for w >= 2 (every spring released once per step).  For 1 + sqrt(delta) <= w < 2 the
-    forth-step springs do not all release and C1 gains k = (2 - w)^3 / 6 (physics.md; checked
-    against the simulation in tests/test_physics.py), so P and Q both gain k.
+    Derivation (physics.md kinematics, lengths in a1, times in a1/(omega R)): every spring in
+    contact creeps at s1 = (1 - eps) - V in the forth step and s2 = -(1 - eps) - V in the back
+    step, so I = s1 C1 + s2 C2 summed over the forth and back steps, where C1, C2 collect the
+    spring-time integrals of the contact (including the forth-step deflection the springs still
+    carry into the back step).  For w >= 2 every spring is released once per step and
+        C1 = 2 w - 4/3 + 2 delta + 2/3 delta^1.5,   C2 = 2 delta w + 2 delta - 2/3 delta^1.5,
+    hence  P = C1 - C2 = 2 w (1 - delta) - 4/3 (1 - delta^1.5)
+    and    Q = C1 + C2 = 2 w (1 + delta) - 4/3 + 4 delta;  I = 0 gives Eq. 32 = (1-eps) P/Q.
+
+    For 1 + sqrt(delta) <= w < 2 not every forth-step spring is released before the step
+    reverses and C1 gains k = (2 - w)^3 / 6, so P and Q both gain k.  This branch is taken from
+    physics.md, not from the paper; it is checked against the simulation in
+    tests/test_physics.py.  Below w = 1 + sqrt(delta) some springs never release and there is
+    no steady working point: ValueError.
     """
-    delta = _arr("delta", delta, 0, 1)
-    w = _arr("w", w, 0, np.inf, lo_open=True)
+    delta, w = _arr("delta", delta, 0, 1), _pos("w", w)
     low = w < 1 + np.sqrt(delta)
     if np.any(low):
-        raise ValueError("w must be >= 1 + sqrt(delta): below, some springs never release and "
-                         "there is no steady working point")
-    k = np.where(w < 2, (2 - w) ** 3 / 6, 0.0)
+        wb, db = np.broadcast_arrays(w, delta)
+        raise ValueError(f"w must be >= 1 + sqrt(delta) (got w = {wb[low].ravel()[0]!r}, "
+                         f"delta = {db[low].ravel()[0]!r}): below, some springs never release "
+                         "and there is no steady working point")
+    k = np.maximum(2 - w, 0.0) ** 3 / 6
     P = 2 * w * (1 - delta) - 4 / 3 * (1 - delta ** 1.5) + k
     Q = 2 * w * (1 + delta) - 4 / 3 + 4 * delta + k
     return _out(P), _out(Q)
@@ -134,82 +146,90 @@ def impulse_coefficients(delta, w):
 
 def eq32(delta, eps, w):
     """Eq. 32: working point v*/(omega R) with the transition between the steps,
-    (1-eps) [4/3 (1 - delta^1.5) - 2w(1-delta)] / [4/3 - 4 delta - 2w(1+delta)].
-    Valid for w >= 2 only (use ``working_point_ratio`` for 1 + sqrt(delta) <= w < 2)."""
-    delta = _arr("delta", delta, 0, 1)
-    eps = _arr("eps", eps)
-    w = _arr("w", w, 0, np.inf, lo_open=True)
+    (1 - eps) [4/3 (1 - delta^1.5) - 2 w (1 - delta)] / [4/3 - 4 delta - 2 w (1 + delta)];
+    delta in [0, 1] (delta = 0 gives 1 - eps, delta = 1 gives 0), eps finite (eps > 1 is
+    reverse creep), w >= 2 only: use ``working_point_ratio`` for 1 + sqrt(delta) <= w < 2."""
+    delta, eps, w = _arr("delta", delta, 0, 1), _arr("eps", eps), _pos("w", w)
     if np.any(w < 2):
-        raise ValueError("w must be >= 2 for Eq. 32 (the paper's assumption); "
-                         "working_point_ratio covers 1 + sqrt(delta) <= w < 2")
+        raise ValueError(f"w must be >= 2 for Eq. 32 (the paper's assumption), got "
+                         f"{w[w < 2].ravel()[0]!r}; working_point_ratio covers "
+                         "1 + sqrt(delta) <= w < 2")
     num = 4 / 3 * (1 - delta ** 1.5) - 2 * w * (1 - delta)
     den = 4 / 3 - 4 * delta - 2 * w * (1 + delta)
     return _out((1 - eps) * num / den)
 
 
 def working_point_ratio(delta, eps, w):
-    """Working point v*/(omega R) for w >= 1 + sqrt(delta): Eq. 32 for w >= 2, with the
-    (2 - w)^3/6 correction below (see ``impulse_coefficients``)."""
+    """Working point v*/(omega R) = (1 - eps) P/Q (zero period impulse) for
+    w >= 1 + sqrt(delta): equal to Eq. 32 for w >= 2, with the (2 - w)^3/6 correction of
+    physics.md below (see ``impulse_coefficients``; checked against simulation in
+    tests/test_physics.py)."""
     eps = _arr("eps", eps)
     P, Q = impulse_coefficients(delta, w)
     return _out((1 - eps) * np.asarray(P) / np.asarray(Q))
 
 
-def invert_eq32_delta(ratio, eps, w):
-    """delta in [0, 1] with eq32(delta, eps, w) = ratio (exact: a cubic in b = sqrt(delta)).
+def _cubic_root_b(r, w):
+    """b = sqrt(delta) in [0, 1] with Eq. 32 = r (1 - eps), r in [0, 1], w >= 2.
 
-    eq32 = r (1-eps) with r = ratio/(1-eps) in [0, 1]:
-    -4/3 b^3 + (2w + 4r + 2wr) b^2 + (4/3 - 2w - 4/3 r + 2wr) = 0; eq32 falls monotonically
-    from 1-eps at delta = 0 to 0 at delta = 1, so the root in [0, 1] is unique."""
-    ratio = _arr("ratio", ratio)
-    eps = _arr("eps", eps)
-    w = _arr("w", w, 2, np.inf)
+    num(b) = r den(b) reads f(b) = -4/3 b^3 + c2 b^2 + c0 = 0 with c2 = 2w + 4r + 2wr and
+    c0 = (4/3 - 2w)(1 - r).  f(0) <= 0 <= f(1) = r (8/3 + 4w) and f'(b) = b (2 c2 - 4 b) > 0
+    on (0, 1] for w >= 2, so the root in [0, 1] is unique (Eq. 32 is monotone in delta)."""
+    c2, c0 = 2 * w + 4 * r + 2 * w * r, (4 / 3 - 2 * w) * (1 - r)
+    roots = np.roots([-4 / 3, c2, 0.0, c0])
+    real = roots.real[np.abs(roots.imag) <= 1e-7 * (1 + np.abs(roots))]
+    b = float(np.clip(np.max(real[real <= 1 + 1e-7], initial=0.0), 0.0, 1.0))
+    for _ in range(2):  # Newton polish to full precision (the root is simple for r < 1)
+        fp = b * (2 * c2 - 4 * b)
+        if fp > 0:
+            b = float(np.clip(b - (-4 / 3 * b ** 3 + c2 * b ** 2 + c0) / fp, 0.0, 1.0))
+    return b
+
+
+def invert_eq32_delta(ratio, eps, w):
+    """delta in [0, 1] with eq32(delta, eps, w) = ratio (= v*/(omega R)), solved exactly as a
+    cubic in b = sqrt(delta) (see ``_cubic_root_b``); eps finite and != 1, w >= 2.  ``ratio``
+    must lie in the reachable range [0, 1 - eps] (for eps > 1: [1 - eps, 0])."""
+    ratio, eps, w = _arr("ratio", ratio), _arr("eps", eps), _arr("w", w, 2, np.inf)
     if np.any(eps == 1):
         raise ValueError("eps must differ from 1 (no creep: every delta gives v* = 0)")
     r = ratio / (1 - eps)
-    if np.any((r < 0) | (r > 1)):
-        raise ValueError("ratio must lie between 0 and 1 - eps (the reachable working points)")
-    rb, wb = np.broadcast_arrays(r, w)
-    out = np.empty(rb.shape)
-    for idx in np.ndindex(rb.shape):
-        rr, ww = rb[idx], wb[idx]
-        roots = np.roots([-4 / 3, 2 * ww + 4 * rr + 2 * ww * rr, 0.0,
-                          4 / 3 - 2 * ww - 4 / 3 * rr + 2 * ww * rr])
-        real = roots[np.abs(roots.imag) < 1e-9].real
-        ok = real[(real >= -1e-12) & (real <= 1 + 1e-12)]
-        b = float(np.clip(ok[np.argmin(np.abs(ok - 0.5))] if ok.size else np.nan, 0, 1))
-        # one Newton polish on the cubic for full precision
-        f = -4 / 3 * b ** 3 + (2 * ww + 4 * rr + 2 * ww * rr) * b ** 2 + \
-            (4 / 3 - 2 * ww - 4 / 3 * rr + 2 * ww * rr)
-        fp = -4 * b ** 2 + 2 * (2 * ww + 4 * rr + 2 * ww * rr) * b
-        if fp != 0:
-            b = float(np.clip(b - f / fp, 0, 1))
-        out[idx] = b * b
-    return _out(out)
+    bad = (r < -_TOL) | (r > 1 + _TOL)
+    if np.any(bad):
+        rb, eb = np.broadcast_arrays(ratio, eps)
+        lo, hi = sorted((0.0, 1 - float(eb[bad].ravel()[0])))
+        raise ValueError(f"ratio must be in the reachable range [{lo:g}, {hi:g}] "
+                         f"(eps = {eb[bad].ravel()[0]!r}), got {rb[bad].ravel()[0]!r}")
+    rb, wb = np.broadcast_arrays(np.clip(r, 0.0, 1.0), w)
+    b = np.array([_cubic_root_b(rr, ww) for rr, ww in zip(rb.ravel(), wb.ravel())])
+    return _out((b ** 2).reshape(rb.shape))
 
 
 def invert_eq32_eps(ratio, delta, w):
-    """eps with eq32(delta, eps, w) = ratio: eps = 1 - ratio / eq32(delta, 0, w)."""
+    """eps with eq32(delta, eps, w) = ratio: eps = 1 - ratio / eq32(delta, 0, w);
+    ratio finite, delta in [0, 1) (at delta = 1 every eps gives 0), w >= 2."""
     ratio = _arr("ratio", ratio)
     base = np.asarray(eq32(delta, 0.0, w))
     if np.any(base == 0):
-        raise ValueError("delta must be < 1 (delta = 1 gives v* = 0 for every eps)")
+        raise ValueError("delta must be in [0, 1) (delta = 1 gives v* = 0 for every eps)")
     return _out(1 - ratio / base)
 
 
 # ----------------------------------------------------------------------------- Cattaneo-Mindlin
 def mindlin_ustar(mu, d, E_star, G_star):
-    """Tangential displacement u* = mu E* d / G* [m] at which the whole contact slides."""
-    mu = _arr("mu", mu, 0, np.inf, lo_open=True)
-    d = _arr("d", d, 0)
-    return _out(mu * _arr("E_star", E_star, 0, np.inf, lo_open=True) * d
-                / _arr("G_star", G_star, 0, np.inf, lo_open=True))
+    """Tangential displacement u* = mu E* d / G* [m] at which the whole contact slides;
+    mu in (0, inf), d >= 0 [m], E_star, G_star > 0 [Pa]."""
+    mu, d = _pos("mu", mu), _arr("d", d, 0)
+    return _out(mu * _pos("E_star", E_star) * d / _pos("G_star", G_star))
 
 
 def mindlin_force(u, mu, N, d, E_star, G_star):
-    """Cattaneo-Mindlin: T = mu N [1 - (1 - |u|/u*)^(3/2)] sign(u) for |u| <= u*, mu N beyond."""
-    u = _arr("u", u)
-    N = _arr("N", N, 0)
+    """Cattaneo-Mindlin tangential force [N] of a Hertz contact (normal force N >= 0 [N],
+    indentation d [m]) displaced by u [m] without rolling:
+    T = mu N [1 - (1 - |u|/u*)^(3/2)] sign(u) for |u| <= u*, mu N sign(u) beyond (odd in u).
+    Its initial slope 3/2 mu N/u* equals the stuck stiffness 2 a G*, a = sqrt(R d), when
+    N = hertz_force(d, R, E_star)."""
+    u, N = _arr("u", u), _arr("N", N, 0)
     us = np.asarray(mindlin_ustar(mu, d, E_star, G_star))
-    x = np.clip(np.abs(u) / us, 0.0, 1.0)
+    x = np.minimum(np.abs(u), us) / np.where(us > 0, us, 1.0)  # |u|/u* clipped to [0, 1]
     return _out(np.sign(u) * np.asarray(mu) * N * (1 - (1 - x) ** 1.5))
