@@ -25,10 +25,15 @@ def _arr(name, x, lo=-np.inf, hi=np.inf, lo_open=False, hi_open=False):
     if hi_open:
         bad |= a == hi
     if np.any(bad):
-        rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+        rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open or hi == np.inf else ']'}"
         what = "finite" if np.isinf(lo) and np.isinf(hi) else f"finite and in {rng}"
-        raise ValueError(f"{name} must be {what}, got {a[bad].ravel()[0]!r}")
+        raise ValueError(f"{name} must be {what}, got {_first(a, bad)!r}")
     return a
+
+
+def _first(x, mask):
+    """The first element of ``x`` (broadcast to ``mask``) where ``mask`` holds, as a float."""
+    return float(np.broadcast_to(x, np.shape(mask))[mask].ravel()[0])
 
 
 def _pos(name, x):
@@ -134,9 +139,8 @@ def impulse_coefficients(delta, w):
     delta, w = _arr("delta", delta, 0, 1), _pos("w", w)
     low = w < 1 + np.sqrt(delta)
     if np.any(low):
-        wb, db = np.broadcast_arrays(w, delta)
-        raise ValueError(f"w must be >= 1 + sqrt(delta) (got w = {wb[low].ravel()[0]!r}, "
-                         f"delta = {db[low].ravel()[0]!r}): below, some springs never release "
+        raise ValueError(f"w must be >= 1 + sqrt(delta), got w = {_first(w, low)!r} at "
+                         f"delta = {_first(delta, low)!r}: below, some springs never release "
                          "and there is no steady working point")
     k = np.maximum(2 - w, 0.0) ** 3 / 6
     P = 2 * w * (1 - delta) - 4 / 3 * (1 - delta ** 1.5) + k
@@ -152,7 +156,7 @@ def eq32(delta, eps, w):
     delta, eps, w = _arr("delta", delta, 0, 1), _arr("eps", eps), _pos("w", w)
     if np.any(w < 2):
         raise ValueError(f"w must be >= 2 for Eq. 32 (the paper's assumption), got "
-                         f"{w[w < 2].ravel()[0]!r}; working_point_ratio covers "
+                         f"{_first(w, w < 2)!r}; working_point_ratio covers "
                          "1 + sqrt(delta) <= w < 2")
     num = 4 / 3 * (1 - delta ** 1.5) - 2 * w * (1 - delta)
     den = 4 / 3 - 4 * delta - 2 * w * (1 + delta)
@@ -196,10 +200,10 @@ def invert_eq32_delta(ratio, eps, w):
     r = ratio / (1 - eps)
     bad = (r < -_TOL) | (r > 1 + _TOL)
     if np.any(bad):
-        rb, eb = np.broadcast_arrays(ratio, eps)
-        lo, hi = sorted((0.0, 1 - float(eb[bad].ravel()[0])))
-        raise ValueError(f"ratio must be in the reachable range [{lo:g}, {hi:g}] "
-                         f"(eps = {eb[bad].ravel()[0]!r}), got {rb[bad].ravel()[0]!r}")
+        e = _first(eps, bad)
+        lo, hi = sorted((0.0, 1 - e))
+        raise ValueError(f"ratio must be in the reachable range [{lo:g}, {hi:g}] (eps = {e!r}), "
+                         f"got {_first(ratio, bad)!r}")
     rb, wb = np.broadcast_arrays(np.clip(r, 0.0, 1.0), w)
     b = np.array([_cubic_root_b(rr, ww) for rr, ww in zip(rb.ravel(), wb.ravel())])
     return _out((b ** 2).reshape(rb.shape))
