@@ -16,13 +16,18 @@ the larger force N1 = N_max, the other N2 = delta^(3/2) N1.  Choices (see ``Eq32
 ``Eq32OpenLoop`` plans at the first tick: velocity |target| / (``horizon_fraction`` x episode
 time), driven for the planned time plus the runner's start-up lag (``relaxation_time``, from
 the slope of the period impulse), then stops (``Eq32Design.stop``: release, then hold).
-``Eq32Feedback`` re-chooses the velocity every period from the remaining error,
-v = clip(error / ``time_constant``, +-v_max) (time constant at least twice the runner's
-relaxation time, so the loop does not ring), and stops driving inside half the tolerance.
+``Eq32Feedback`` re-chooses the working point every period from the remaining error and the
+runner's measured velocity: a braking curve gives the wanted velocity, the first-order runner
+model (relaxation time t_r) the working point that approaches it, an integral (bias) term
+what Eq. 32 leaves out (loads, resonance); it stops inside half the tolerance.  (A loop on the
+error alone has to be slower than t_r, 0.7-1.5 ms for the 20 g runner, or it overshoots.)
 
 Both have SB3's ``predict(obs, state=None, episode_start=None, deterministic=True)`` and work on
-one observation (13,) or a batch (n, 13); they read the error from obs[0] * target_max and keep
-their own tick counter per env (reset on ``episode_start``).
+one observation (13,) or a batch (n, 13) (a single env or a VecEnv: ``from_env`` takes
+either); they read the error from obs[0] * target_max and keep their own tick counter per env
+(reset on ``episode_start``).  The action is built by ``rolling_env.actions.from_controls``,
+the inverse of the env's action mapping ``to_controls`` (one module for both; the compiled
+env tick is tested to map actions exactly as ``to_controls``, tests/test_env.py).
 """
 from __future__ import annotations
 
@@ -134,6 +139,24 @@ class Eq32Design:
         return from_controls(self.scene, N, 0.0, 0.0)
 
 
+def scene_of(env) -> Scene:
+    """The ``Scene`` of an env, a vector env (SB3 or Gymnasium) or a scene itself."""
+    if isinstance(env, Scene):
+        return env
+    getters = (lambda: env.get_attr("scene")[0],           # SB3 VecEnv (wrappers forward)
+               lambda: env.unwrapped.scene,                 # gymnasium env behind wrappers
+               lambda: env.unwrapped.core.scene)            # rolling_env's gymnasium vector env
+    for get in getters:
+        try:
+            sc = get()
+        except (AttributeError, IndexError, TypeError):
+            continue
+        if isinstance(sc, Scene):
+            return sc
+    raise TypeError(f"cannot find the scene of {env!r}: pass a RollingDrive env, vector env "
+                    "or Scene")
+
+
 class _Eq32Base:
     def __init__(self, scene: Scene, **design_kw):
         self.design = Eq32Design(scene, **design_kw)
@@ -142,8 +165,9 @@ class _Eq32Base:
 
     @classmethod
     def from_env(cls, env, **kw):
-        return cls(env.unwrapped.scene if hasattr(env, "unwrapped") else env.get_attr("scene")[0],
-                   **kw)
+        """Build from the scene of a single env (``gym.make``/``rolling_env.make``), an SB3
+        VecEnv (``RollingDriveVecEnv``, possibly wrapped) or a Gymnasium vector env."""
+        return cls(scene_of(env), **kw)
 
     def predict(self, obs, state=None, episode_start=None, deterministic=True):
         obs = np.asarray(obs, dtype=np.float64)
@@ -202,32 +226,116 @@ class Eq32OpenLoop(_Eq32Base):
 
 
 class Eq32Feedback(_Eq32Base):
-    """Re-choose the working-point velocity each period from the remaining error."""
+    """Re-choose the working point each period from the remaining error and the runner's speed.
 
-    def __init__(self, scene: Scene, time_constant_periods: float = 4.0, **design_kw):
+    A heavy runner does not jump to the working velocity: the period-mean force of the contact
+    is c (v_wp - v*) with c = m / t_r (``Eq32Design.relaxation_time``), so the runner relaxes
+    to v_wp with the time constant t_r (0.7-1.5 ms for the 20 g runner, about half the
+    episode).  A loop on the error alone must be slower than t_r or it overshoots.  This
+    controller closes two loops, once per period (tau), on the first-order runner model:
+
+    * position: the wanted velocity ``v_des = sign(e) min(sqrt(2 a_b |e|), |e| / T_f)`` (the
+      braking curve of the deceleration ``a_b`` = ``brake_fraction`` of the largest the
+      family gives, v_max / t_r; near the target a first-order approach in
+      ``T_f = approach_periods`` periods);
+    * velocity: the mean velocity of the next period should be
+      ``v_next = v_des + (v - v_des) exp(-tau / T_v)`` (``T_v = velocity_periods`` periods),
+      v the measured mean velocity of the last period (from the change of the error).  The
+      model's mean velocity over a period at a fixed working point is
+      ``v_wp + b + (v - v_wp - b) r``, r = (1 - exp(-tau/t_r)) t_r / tau, solved for v_wp and
+      saturated to +-v_max (a negative v_wp is the mirrored pattern).  ``b`` is an additive
+      velocity bias learned from the model's misprediction each period (gain
+      ``bias_gain``): what Eq. 32 leaves out (a load on the runner, inertia effects near
+      resonance) acts on the loop as such a bias, and this integral action removes it.
+
+    (delta, creep) come from Eq. 32 inverted exactly (``Eq32Design.choose``), inside the
+    wearless window.  The drive stops (release, then hold; ``Eq32Design.stop``) when
+    |e| < ``stop_fraction`` x tolerance and the runner is slow (|v| T_f below the same), and
+    resumes once |e| exceeds the tolerance.
+    """
+
+    def __init__(self, scene: Scene, approach_periods: float = 3.0,
+                 velocity_periods: float = 2.0, brake_fraction: float = 0.5,
+                 bias_gain: float = 0.3, stop_fraction: float = 0.5, **design_kw):
         super().__init__(scene, **design_kw)
-        # slower than twice the runner's relaxation, or the loop rings
-        self.time_constant = max(time_constant_periods * scene.period,
-                                 2.0 * self.design.relaxation_time(0.5))
+        for name, val in (("approach_periods", approach_periods),
+                          ("velocity_periods", velocity_periods)):
+            if not val > 0:
+                raise ValueError(f"{name} must be > 0, got {val}")
+        for name, val in (("brake_fraction", brake_fraction), ("stop_fraction", stop_fraction)):
+            if not 0 < val <= 1:
+                raise ValueError(f"{name} must be in (0, 1], got {val}")
+        if not 0 <= bias_gain <= 1:
+            raise ValueError(f"bias_gain must be in [0, 1], got {bias_gain}")
+        d = self.design
+        self.tau = 2 * d.half_ticks * scene.dt
+        self.T_f = approach_periods * self.tau
+        self.T_v = velocity_periods * self.tau
+        self.bias_gain = bias_gain
+        self.stop_fraction = stop_fraction
+        t_r0 = d.relaxation_time(d.delta_min)
+        self.a_brake = brake_fraction * d.v_max / t_r0 if t_r0 > 0 else math.inf
 
     def _reset_all(self, n):
         self._cmd = [(1, 1.0, 0.0, False)] * n
         self._idle = np.zeros(n, dtype=np.int64)
+        self._e_prev = np.zeros(n)
+        self._k_prev = np.zeros(n, dtype=np.int64)
+        self._bias = np.zeros(n)
+        self._pred = np.full(n, np.nan)   # predicted mean velocity of the running period
+        self._r = np.zeros(n)
 
     def _start(self, i, o):
         self._cmd[i] = (1, 1.0, 0.0, False)
         self._idle[i] = 0
+        self._e_prev[i] = self._error(o)
+        self._k_prev[i] = 0
+        self._bias[i] = 0.0
+        self._pred[i] = np.nan
+
+    def _ratio(self, delta: float) -> float:
+        """r = mean over one period of (v - v_wp) / (v_start - v_wp) for the first-order model."""
+        t_r = self.design.relaxation_time(delta)
+        if t_r <= 0:
+            return 0.0
+        x = self.tau / t_r
+        return -math.expm1(-x) / x
+
+    def plan(self, e: float, v: float, bias: float = 0.0) -> tuple[float, float, float]:
+        """(signed working velocity v_wp [m/s], r, predicted mean velocity of the period) for
+        error ``e`` [m], runner velocity ``v`` [m/s] and learned bias [m/s]."""
+        d = self.design
+        v_des = math.copysign(min(math.sqrt(2 * self.a_brake * abs(e)), abs(e) / self.T_f), e)
+        v_next = v_des + (v - v_des) * math.exp(-self.tau / self.T_v)
+        delta, v_wp, r = d.delta_pref, v_next, 0.0
+        for _ in range(3):  # t_r depends on the delta that the working point needs
+            r = self._ratio(delta)
+            v_wp = float(np.clip((v_next - v * r) / (1 - r) - bias, -d.v_max, d.v_max))
+            delta, _ = d.choose(abs(v_wp))
+        r = self._ratio(delta)
+        return v_wp, r, v_wp + bias + (v - v_wp - bias) * r
 
     def _act(self, i, o):
         k = int(self._k[i])
         h = self.design.half_ticks
+        tol = self.scene.tolerance
         if k == 0 or (k + h // 2) % (2 * h) == 0:  # re-plan once per period
             e = self._error(o)
-            if abs(e) < 0.5 * self.scene.tolerance:
+            v = ((self._e_prev[i] - e) / ((k - self._k_prev[i]) * self.scene.dt)
+                 if k > 0 else 0.0)
+            if np.isfinite(self._pred[i]) and self._r[i] < 1:
+                # misprediction of the period's mean velocity -> bias of the working point
+                self._bias[i] += self.bias_gain * (v - self._pred[i])
+            self._e_prev[i], self._k_prev[i] = e, k
+            was_idle = self._cmd[i][3]
+            lim = self.stop_fraction * tol
+            if (was_idle and abs(e) <= tol) or (abs(e) < lim and abs(v) * self.T_f < lim):
                 self._cmd[i] = (1, 1.0, 0.0, True)
+                self._pred[i] = np.nan
             else:
-                delta, creep = self.design.choose(abs(e) / self.time_constant)
-                self._cmd[i] = (1 if e > 0 else -1, delta, creep, False)
+                v_wp, self._r[i], self._pred[i] = self.plan(e, v, self._bias[i])
+                delta, creep = self.design.choose(abs(v_wp))
+                self._cmd[i] = (1 if v_wp >= 0 else -1, delta, creep, False)
         direction, delta, creep, idle = self._cmd[i]
         if idle:
             self._idle[i] += 1

@@ -44,16 +44,23 @@ def parse_kwargs(text) -> dict:
 
 
 def make_vec_env(scene, n_envs: int, seed: int, env_kwargs: dict | None = None):
-    """The training vector env: the natively batched ``RollingDriveVecEnv`` (one compiled call
-    for all envs; 3-4x SB3's DummyVecEnv of single envs at 8 envs, see results/benchmarks.md)
-    wrapped in ``VecMonitor``; env i is seeded ``seed + i`` like SB3's make_vec_env."""
-    from stable_baselines3.common.vec_env import VecMonitor
-
-    from rolling_env.vector import RollingDriveVecEnv
+    """The training vector env, chosen here and only here: the natively batched
+    ``rolling_env.vector.RollingDriveVecEnv`` (one compiled call steps all envs; 3.3x the
+    single env at 8 envs, see results/benchmarks.md) when it is available, else SB3's
+    ``DummyVecEnv`` of single envs (``SubprocVecEnv`` is slower on 2 cores: IPC dominates);
+    wrapped in ``VecMonitor``.  Env i is seeded ``seed + i`` like SB3's make_vec_env."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
     kw = dict(env_kwargs or {})
     kw.pop("scene", None)
-    venv = VecMonitor(RollingDriveVecEnv(n_envs, scene=scene, **kw))
+    try:
+        from rolling_env.vector import RollingDriveVecEnv
+    except ImportError:  # no batched env: one Python env per slot
+        import rolling_env
+        venv = DummyVecEnv([lambda: rolling_env.make(scene, **kw) for _ in range(n_envs)])
+    else:
+        venv = RollingDriveVecEnv(n_envs, scene=scene, **kw)
+    venv = VecMonitor(venv)
     venv.seed(seed)
     return venv
 

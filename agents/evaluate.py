@@ -3,8 +3,8 @@
     python -m agents.evaluate --scenes default resonant ... --runs runs/ --episodes 20
 
 Controllers: the two Eq. 32 baselines and every trained agent under ``<runs>/<scene>/*/``
-(its best model from EvalCallback if present, else the final model, with the VecNormalize
-statistics saved beside it).  Writes ``results/comparison.md`` and ``results/comparison.csv``
+(``agent_file``: EvalCallback's best model when its VecNormalize statistics were saved with
+it, else the final model, with the statistics saved beside it).  Writes ``results/comparison.md`` and ``results/comparison.csv``
 (atomically) and plots under ``results/plots/``: learning curves per scene and one trajectory
 per controller on the same target.
 """
@@ -43,31 +43,39 @@ class NormalizedAgent:
 
 
 def load_agent(path, env=None) -> NormalizedAgent:
-    """Load ``<name>.zip`` and ``<name>_vecnormalize.pkl`` (if beside it)."""
+    """Load ``<name>.zip`` and, if beside it, ``<name>_vecnormalize.pkl`` (observation
+    statistics applied, frozen).  The algorithm is read from the run's config.yml."""
     import stable_baselines3 as sb3
+    import yaml
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     path = Path(path)
-    meta = path.parent / "config.yml"
-    algo = "ppo"
-    if meta.exists():
-        import yaml
-        algo = yaml.safe_load(meta.read_text()).get("algo", "ppo")
+    cfg = path.parent / "config.yml"
+    algo = yaml.safe_load(cfg.read_text()).get("algo", "ppo") if cfg.exists() else "ppo"
     cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[algo]
     model = cls.load(path, device="cpu")
-    stats = path.with_name(path.stem.replace("best_model", "model") + "_vecnormalize.pkl")
-    if path.stem == "best_model":
-        stats = path.with_name("model_vecnormalize.pkl")
-        if not stats.exists():
-            stats = path.with_name("checkpoint_vecnormalize.pkl")
+    stats = path.with_name(path.stem + "_vecnormalize.pkl")
     vecnorm = None
     if stats.exists():
-        dummy = DummyVecEnv([lambda: rolling_env.make(env.unwrapped.scene if env is not None
-                                                      else "default")])
-        vecnorm = VecNormalize.load(str(stats), dummy)
+        scene = env.unwrapped.scene if env is not None else "default"
+        vecnorm = VecNormalize.load(str(stats), DummyVecEnv([lambda: rolling_env.make(scene)]))
         vecnorm.training = False
         vecnorm.norm_reward = False
     return NormalizedAgent(model, vecnorm)
+
+
+def agent_file(run: Path) -> Path | None:
+    """The model of a run to evaluate: EvalCallback's best model (selected on the training
+    script's own eval env, never on the held-out targets here) when its VecNormalize
+    statistics were saved with it, else the final model, else an interrupted run's
+    checkpoint."""
+    best = run / "best_model.zip"
+    if best.exists() and (run / "best_model_vecnormalize.pkl").exists():
+        return best
+    for name in ("model.zip", "checkpoint.zip"):
+        if (run / name).exists():
+            return run / name
+    return None
 
 
 def held_out_targets(scene, n: int) -> list[float]:
@@ -96,16 +104,20 @@ def episode_metrics(data: dict, tol: float) -> dict:
 def controllers_for(scene: str, runs: Path, env) -> dict:
     ctrls = {"eq32-open-loop": Eq32OpenLoop.from_env(env),
              "eq32-feedback": Eq32Feedback.from_env(env)}
-    for run in sorted((runs / scene).glob("*")):
-        model = run / "best_model.zip"
-        if not model.exists():
-            model = run / "model.zip"
-        if model.exists():
+    for run in sorted(p for p in (runs / scene).glob("*") if p.is_dir()):
+        model = agent_file(run)
+        if model is not None:
             ctrls[run.name] = load_agent(model, env)
+            ctrls[run.name].file = model.name
     return ctrls
 
 
+MACHINE = "2-core x86_64 CPU, no GPU"
+
+
 def evaluate_scene(scene: str, runs: Path, episodes: int) -> tuple[list[dict], dict]:
+    """Every controller on the scene's held-out targets (episode i: target i, seed
+    EVAL_SEED + i).  Returns one row per controller and the trajectory of target 0 of each."""
     env = rolling_env.make(scene)
     tol = env.unwrapped.scene.tolerance
     targets = held_out_targets(scene, episodes)
@@ -117,7 +129,8 @@ def evaluate_scene(scene: str, runs: Path, episodes: int) -> tuple[list[dict], d
             per.append(episode_metrics(data, tol))
             if i == 0:
                 trajectories[name] = data
-        row = {"scene": scene, "controller": name, "episodes": len(per)}
+        row = {"scene": scene, "controller": name, "model_file": getattr(ctrl, "file", "-"),
+               "episodes": len(per)}
         for key in ("final_abs_error", "rms_error", "slip_work", "return"):
             vals = np.array([p[key] for p in per])
             row[f"{key}_mean"] = float(vals.mean())
@@ -136,81 +149,146 @@ def evaluate_scene(scene: str, runs: Path, episodes: int) -> tuple[list[dict], d
 def _budget(run: Path) -> dict:
     meta = run / "meta.json"
     if not meta.exists():
-        return {"train_env_steps": 0, "train_wall_seconds": 0.0}
+        return {"train_env_steps": 0, "train_wall_seconds": 0.0, "machine": "-"}
     m = json.loads(meta.read_text())
-    return {"train_env_steps": m["env_steps"], "train_wall_seconds": round(m["wall_seconds"], 1)}
+    return {"train_env_steps": m["env_steps"], "train_wall_seconds": round(m["wall_seconds"], 1),
+            "machine": MACHINE}
 
 
-COLS = ["scene", "controller", "episodes", "tolerance", "final_abs_error_mean",
+COLS = ["scene", "controller", "model_file", "episodes", "tolerance", "final_abs_error_mean",
         "final_abs_error_std", "rms_error_mean", "rms_error_std", "reached_fraction",
-        "settle_time_mean", "slip_work_mean", "slip_work_std", "return_mean", "train_env_steps",
-        "train_wall_seconds"]
+        "settle_time_mean", "slip_work_mean", "slip_work_std", "return_mean", "return_std",
+        "train_env_steps", "train_wall_seconds", "machine"]
+BASELINES = ("eq32-open-loop", "eq32-feedback")
 
 
-def write_tables(rows: list[dict], out: Path) -> None:
+def goal_verdicts(rows: list[dict]) -> list[dict]:
+    """Per scene: the best baseline (lowest mean final |error|) against each trained agent.
+    The goal: final error <= half the baseline's at no more slip work."""
+    out = []
+    for scene in dict.fromkeys(r["scene"] for r in rows):
+        rs = [r for r in rows if r["scene"] == scene]
+        base = [r for r in rs if r["controller"] in BASELINES]
+        if not base:
+            continue
+        b = min(base, key=lambda r: r["final_abs_error_mean"])
+        for r in rs:
+            if r["controller"] in BASELINES:
+                continue
+            e_ratio = r["final_abs_error_mean"] / b["final_abs_error_mean"]
+            w_b, w_a = b["slip_work_mean"], r["slip_work_mean"]
+            no_more_wear = w_a <= w_b  # both exactly 0 with mu = inf
+            out.append({"scene": scene, "agent": r["controller"], "baseline": b["controller"],
+                        "error_ratio": e_ratio,
+                        "slip_ratio": (w_a / w_b) if w_b > 0 else (np.nan if w_a == 0 else np.inf),
+                        "met": bool(e_ratio <= 0.5 and no_more_wear)})
+    return out
+
+
+def _fmt_ratio(r: float) -> str:
+    return "both 0" if np.isnan(r) else ("inf" if np.isinf(r) else f"{r:.2f}")
+
+
+def _fmt_settle(st: float) -> str:
+    return "never" if not np.isfinite(st) else f"{st * 1e3:.2f}"
+
+
+def write_tables(rows: list[dict], out: Path, episodes: int | None = None) -> None:
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=COLS, extrasaction="ignore")
     w.writeheader()
     w.writerows(rows)
     atomic_write(out / "comparison.csv", lambda p: Path(p).write_text(buf.getvalue()))
+    n = episodes or (rows[0]["episodes"] if rows else 0)
     lines = ["# Controllers compared on held-out targets", "",
-             "Generated by `python -m agents.evaluate` (see README).  Per scene: the same "
-             f"targets and seeds (base seed {EVAL_SEED}) for every controller.  Errors in "
-             "units of the scene's tolerance; slip work in nJ; settle = time after which "
-             "|error| stays within the tolerance (mean over the episodes that settle).", "",
+             "Generated by `python -m agents.evaluate` (see README).  Per scene every controller "
+             f"runs the same {n} held-out targets (drawn with seed {EVAL_SEED} from the "
+             "scene's target range; episode i uses env seed "
+             f"{EVAL_SEED} + i), one episode each (512 ticks = 3.2 ms).  Errors in units of the "
+             "scene's tolerance; RMS over the whole episode (tracking); *reached* = share of "
+             "episodes that end within the tolerance; *settle* = mean time after which "
+             "|error| stays within the tolerance (over the episodes that reach it; 'never' if "
+             "none does); slip work = friction work of the episode (wear), mean over episodes, "
+             "in nJ (0 with mu = inf).  Training budget: env steps and wall time of the run on "
+             f"the {MACHINE} (shared with concurrent jobs); baselines need none.", "",
              "| scene | controller | final abs error / tol (mean ± std) | RMS error / tol | "
-             "reached | settle [ms] | slip work [nJ] | training (env steps, wall s) |",
+             "reached | settle [ms] | slip work [nJ] (mean ± std) | training (env steps, wall s) |",
              "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         tol = r["tolerance"]
-        st = r["settle_time_mean"]
-        settle = "never" if not np.isfinite(st) else f"{st * 1e3:.2f}"
         budget = (f"{r['train_env_steps']:,}, {r['train_wall_seconds']:.0f}"
                   if r["train_env_steps"] else "-")
         lines.append(
             f"| {r['scene']} | {r['controller']} | {r['final_abs_error_mean'] / tol:.2f} ± "
             f"{r['final_abs_error_std'] / tol:.2f} | {r['rms_error_mean'] / tol:.1f} | "
-            f"{100 * r['reached_fraction']:.0f}% | {settle} | {r['slip_work_mean'] * 1e9:.3g} | "
-            f"{budget} |")
+            f"{100 * r['reached_fraction']:.0f}% | {_fmt_settle(r['settle_time_mean'])} | "
+            f"{r['slip_work_mean'] * 1e9:.3g} ± {r['slip_work_std'] * 1e9:.2g} | {budget} |")
+    verdicts = goal_verdicts(rows)
+    if verdicts:
+        lines += ["", "## The goal: at most half the best baseline's final error at no more slip "
+                  "work", "",
+                  "Best baseline = the Eq. 32 controller with the lower mean final error in the "
+                  "scene.", "",
+                  "| scene | agent | best baseline | final error agent / baseline | "
+                  "slip work agent / baseline | met |", "|---|---|---|---|---|---|"]
+        for v in verdicts:
+            sr = v["slip_ratio"]
+            lines.append(f"| {v['scene']} | {v['agent']} | {v['baseline']} | "
+                         f"{v['error_ratio']:.2f} | {_fmt_ratio(sr)}"
+                         f" | {'yes' if v['met'] else 'no'} |")
     atomic_write(out / "comparison.md", lambda p: Path(p).write_text("\n".join(lines) + "\n"))
 
 
-def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path) -> None:
+def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path) -> Path:
+    """results/plots/<scene>.png: the runner on held-out target 0 for every controller, its
+    |error| / tolerance (log), and the learning curves (EvalCallback) of the scene's runs."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+    tol = rolling_env.scenes.load_scene(scene).tolerance
+    fig, ax = plt.subplots(1, 3, figsize=(16, 4.2))
     for name, data in trajectories.items():
-        ax[0].plot(data["t"] * 1e3, data["xstar"] * 1e9, label=name)
+        ls = "--" if name in BASELINES else "-"
+        ax[0].plot(data["t"] * 1e3, data["xstar"] * 1e9, ls, label=name)
+        ax[1].semilogy(data["t"] * 1e3, np.maximum(np.abs(data["error"]) / tol, 1e-3), ls,
+                       label=name)
     first = next(iter(trajectories.values()))
-    ax[0].plot(first["t"] * 1e3, first["target"] * 1e9, "k--", label="target")
-    ax[0].set_xlabel("t [ms]")
-    ax[0].set_ylabel("runner x* [nm]")
-    ax[0].set_title(f"{scene}: one held-out target")
+    ax[0].plot(first["t"] * 1e3, first["target"] * 1e9, "k:", label="target")
+    ax[0].set(xlabel="t [ms]", ylabel="runner x* [nm]",
+              title=f"{scene}: held-out target {first['target'][0] * 1e9:.0f} nm")
     ax[0].legend(fontsize=7)
-    for run in sorted((runs / scene).glob("*")):
+    ax[1].axhline(1.0, color="k", lw=0.8)
+    ax[1].set(xlabel="t [ms]", ylabel="|error| / tolerance", ylim=(1e-2, None),
+              title="tracking error (line: tolerance)")
+    for run in sorted(p for p in (runs / scene).glob("*") if p.is_dir()):
         ev = run / "evaluations.npz"
         if ev.exists():
             d = np.load(ev)
-            ax[1].plot(d["timesteps"], d["results"].mean(axis=1), label=run.name)
-    ax[1].set_xlabel("env steps")
-    ax[1].set_ylabel("mean eval return")
-    ax[1].set_title("learning curves (EvalCallback)")
-    if ax[1].lines:
-        ax[1].legend(fontsize=7)
+            mean, std = d["results"].mean(axis=1), d["results"].std(axis=1)
+            ax[2].plot(d["timesteps"], mean, label=run.name)
+            ax[2].fill_between(d["timesteps"], mean - std, mean + std, alpha=0.2)
+    ax[2].set(xlabel="env steps", ylabel="eval return (mean ± std over episodes)",
+              title="learning curves (EvalCallback)")
+    if ax[2].lines:
+        ax[2].legend(fontsize=7)
     fig.tight_layout()
-    atomic_write(out / "plots" / f"{scene}.png", lambda p: fig.savefig(p, dpi=90, format="png"))
+    path = atomic_write(out / "plots" / f"{scene}.png",
+                        lambda p: fig.savefig(p, dpi=80, format="png"))
     plt.close(fig)
+    return path
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(prog="python -m agents.evaluate", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python -m agents.evaluate",
+                                description=__doc__.splitlines()[0])
     p.add_argument("--scenes", nargs="+", default=rolling_env.list_scenes())
-    p.add_argument("--runs", default="runs")
-    p.add_argument("--episodes", type=int, default=20)
+    p.add_argument("--runs", default="runs", help="folder of training runs (<runs>/<scene>/<run>/)")
+    p.add_argument("--episodes", type=int, default=20, help="held-out targets per scene")
     p.add_argument("--out", default="results")
     args = p.parse_args(argv)
+    if args.episodes < 1:
+        p.error(f"--episodes must be >= 1, got {args.episodes}")
     out, runs = Path(args.out), Path(args.runs)
     rows = []
     for scene in args.scenes:
@@ -218,9 +296,10 @@ def main(argv=None):
         rows += r
         plot_scene(scene, runs, traj, out)
         for row in r:
-            print(f"{scene:20s} {row['controller']:18s} final|e|/tol {row['final_abs_error_mean'] / row['tolerance']:8.2f}"
-                  f"  reached {row['reached_fraction']:.2f}  slip {row['slip_work_mean']:.3e} J")
-    write_tables(rows, out)
+            print(f"{scene:20s} {row['controller']:16s} final|e|/tol "
+                  f"{row['final_abs_error_mean'] / row['tolerance']:8.2f}  reached "
+                  f"{row['reached_fraction']:.2f}  slip {row['slip_work_mean']:.3e} J", flush=True)
+    write_tables(rows, out, args.episodes)
     return 0
 
 

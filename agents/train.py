@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import shutil
 import signal
 import sys
 import time
@@ -67,11 +68,39 @@ class _AtomicCheckpoint:
         return Cb()
 
 
+def _eval_callback(eval_env, run: Path, eval_freq: int, n_episodes: int):
+    """SB3's EvalCallback with every file written atomically: it logs to a scratch folder
+    (``run/.eval_scratch``, removed at the end) and after each evaluation the log is copied
+    atomically to ``run/evaluations.npz``; a new best model is saved atomically as
+    ``best_model.zip`` with the VecNormalize statistics of that moment beside it
+    (``best_model_vecnormalize.pkl``: the statistics it was selected with)."""
+    from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
+
+    scratch = run / ".eval_scratch"
+
+    class OnNewBest(BaseCallback):
+        def _on_step(self):
+            save_model(self.model, self.model.get_vec_normalize_env(), run, "best_model")
+            return True
+
+    class AfterEval(BaseCallback):
+        def _on_step(self):
+            src = scratch / "evaluations.npz"
+            if src.exists():
+                atomic_write(run / "evaluations.npz",
+                             lambda p: Path(p).write_bytes(src.read_bytes()))
+            return True
+
+    return EvalCallback(eval_env, best_model_save_path=None, log_path=str(scratch),
+                        eval_freq=eval_freq, n_eval_episodes=n_episodes, deterministic=True,
+                        verbose=0, callback_on_new_best=OnNewBest(), callback_after_eval=AfterEval())
+
+
 def train(args) -> Path:
     import numpy as np
     import stable_baselines3 as sb3
     import torch
-    from stable_baselines3.common.callbacks import CallbackList, EvalCallback
+    from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.noise import NormalActionNoise
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecNormalize
@@ -108,9 +137,7 @@ def train(args) -> Path:
                 tensorboard_log=str(run / "tb"),
                 policy_kwargs=parse_kwargs(hp.get("policy_kwargs")), **kwargs)
     callbacks = CallbackList([
-        EvalCallback(eval_env, best_model_save_path=str(run), log_path=str(run),
-                     eval_freq=max(args.eval_freq // n_envs, 1),
-                     n_eval_episodes=args.eval_episodes, deterministic=True, verbose=0),
+        _eval_callback(eval_env, run, max(args.eval_freq // n_envs, 1), args.eval_episodes),
         _AtomicCheckpoint.make(run, max(args.checkpoint_freq, 1)),
     ])
 
@@ -126,6 +153,7 @@ def train(args) -> Path:
         interrupted = True
     finally:
         signal.signal(signal.SIGTERM, old)
+        shutil.rmtree(run / ".eval_scratch", ignore_errors=True)
     wall = time.perf_counter() - t0
     save_model(model, model.get_vec_normalize_env(), run,
                "checkpoint" if interrupted else "model")
