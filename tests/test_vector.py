@@ -74,7 +74,7 @@ def test_reset_mask_resets_only_masked():
 
 
 def test_parallel_kernel_equals_serial():
-    a, b = BatchCore(70), BatchCore(70)  # 70 >= PARALLEL_MIN_ENVS: threaded kernel
+    a, b = BatchCore(70), BatchCore(70)  # >= PARALLEL_MIN_ENVS: threaded kernel
     assert a._step_fn is rolling_env._envkernel.env_step_parallel
     b._step_fn = rolling_env._envkernel.env_step_serial
     a.seed(1), b.seed(1)
