@@ -423,11 +423,22 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
         # ---------------------------------------------------------------- commit
         T1 = 0.0
         slip = 0.0
+        rel = 0.0
         clipped = False
         for i in range(i0, i1 + 1):
             Ut = A[i] + B[i] * s
             if mu is not None:
                 Li = L[i]
+                xL = x_lo + i * dx
+                if a > 0.0 and not (xL >= full_lo and xL + dx <= full_hi):
+                    # an edge cell: the deflection it released this sub-step, from the
+                    # creep integral, can be no larger than the friction limit allows (the
+                    # released material is at the limit once the cell slides)
+                    _walk(U[i], xL, xL + dx, c0, a, u, dt, res)
+                    ei = res[4] + s * (res[5] + s * res[6])
+                    if abs(Ut) > Li and Ut != 0.0:
+                        ei *= (Li / Ut) * (Li / Ut)
+                    rel += ei
                 if Ut > Li:
                     xL = x_lo + i * dx
                     ell = _overlap(xL, xL + dx, c1, a)
@@ -455,7 +466,10 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
         st[ST_T] = T1
         st[ST_IMP] += imp
         st[ST_SLIP] += slip
-        st[ST_REL] += E0 + s * (E1 + s * E2)
+        if mu is None:
+            st[ST_REL] += E0 + s * (E1 + s * E2)
+        else:
+            st[ST_REL] += rel
         st[ST_DRIVE] += s0 * imp
         st[ST_RUNNER] += v1 * imp
         if load is not None:
