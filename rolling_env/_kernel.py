@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 # ----------------------------------------------------------------------------- state layout
 ST_C = 0        # patch centre c (spring frame)
@@ -509,22 +509,6 @@ def run_ticks(U, A, B, L, st, p, d, u, v, vs, mu, mass, load, n_sub, dt, out):
         if st[ST_FLAG] != 0.0 and (int(st[ST_FLAG]) & (FLAG_NONFINITE | FLAG_GRID)) != 0:
             return k + 1
     return d.shape[0]
-
-
-@njit(cache=True, parallel=True)
-def run_tick_batch(U, A, B, L, st, p, d, u, v, vs, mu, mass, load, n_sub, dt, out):
-    """One tick for each of the n_env rows (arrays with a leading env axis), in parallel."""
-    for e in prange(U.shape[0]):
-        _tick(U[e], A[e], B[e], L[e], st[e], p[e], d[e], u[e], v[e], vs[e],
-              mu, mass, load, n_sub, dt, out[e])
-
-
-@njit(cache=True)
-def run_tick_batch_serial(U, A, B, L, st, p, d, u, v, vs, mu, mass, load, n_sub, dt, out):
-    """Serial twin of run_tick_batch (small batches, or where threads do not pay)."""
-    for e in range(U.shape[0]):
-        _tick(U[e], A[e], B[e], L[e], st[e], p[e], d[e], u[e], v[e], vs[e],
-              mu, mass, load, n_sub, dt, out[e])
 
 
 @njit(cache=True)

@@ -124,8 +124,8 @@ def naive_equal_accuracy():
     alignments) vs the naive row at 64 springs/a1 (1.1e-2): ours is the more accurate."""
     from . import analytic
     from . import experiments as ex
-    from .converge import _best_time, _naive_module
-    naive = _naive_module()
+    from .converge import _best_time, naive_module
+    naive = naive_module()
     if naive is None:
         return None
     case = (0.7, 0.1, 2.5)

@@ -62,7 +62,6 @@ def naive_module():
     return mod
 
 
-_naive_module = naive_module  # the name rolling_env.bench imports
 
 
 def order(x, err) -> float:
