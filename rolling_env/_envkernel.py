@@ -106,15 +106,47 @@ def _env_tick(e, act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu,
 
 
 @njit(cache=True)
+def _actions_valid(act):
+    """Every action finite and inside [-1, 1] (1e-6 tolerance; within it the tick clips)."""
+    for e in range(act.shape[0]):
+        for j in range(3):
+            x = act[e, j]
+            if not (abs(x) <= 1.0 + 1e-6):  # also False for NaN
+                return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _env_bad(e, st, extra):
+    """1 when env e raised a grid or non-finite flag or has a non-finite reward or velocity."""
+    flag = int(st[e, K.ST_FLAG]) & (K.FLAG_GRID | K.FLAG_NONFINITE)
+    ok = math.isfinite(extra[e, X_REWARD]) and math.isfinite(extra[e, X_VS])
+    return 1 if (flag != 0 or not ok) else 0
+
+
+@njit(cache=True)
 def env_step_serial(act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass, load):
+    """Step every env one tick.  Returns -1 (nothing stepped) when an action is out of range or
+    not finite, else the number of envs left with an error (see ``_env_bad``)."""
+    if not _actions_valid(act):
+        return -1
+    bad = 0
     for e in range(act.shape[0]):
         _env_tick(e, act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass, load)
+        bad += _env_bad(e, st, extra)
+    return bad
 
 
 @njit(cache=True, parallel=True)
 def env_step_parallel(act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass, load):
+    """``env_step_serial`` with the envs spread over threads (prange)."""
+    if not _actions_valid(act):
+        return -1
+    bad = 0
     for e in prange(act.shape[0]):
         _env_tick(e, act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass, load)
+        bad += _env_bad(e, st, extra)
+    return bad
 
 
 @njit(cache=True)

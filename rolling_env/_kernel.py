@@ -73,6 +73,11 @@ OUT_N = 6         # normal force
 OUT_STICK = 7     # stuck fraction of the contact length at the end of the tick (1 with mu = inf)
 N_OUT = 8
 
+# columns of the friction work array L (finite friction only)
+L_LIMIT = 0      # friction limit mu E*/G* integral of uN over the cell's part in contact
+L_E0, L_E1, L_E2 = 1, 2, 3  # released energy of an edge cell this sub-step: e0 + e1 s + e2 s^2
+N_LCOL = 4
+
 # params vector
 P_R = 0
 P_E_OVER_G = 1
@@ -89,16 +94,20 @@ def _overlap(xL, xR, c, a):
 
 
 @njit(cache=True, inline="always")
-def _normal_content(xL, xR, c, a, d, R):
-    """Integral of uN = d - (x - c)^2 / R over the cell's part in contact."""
+def _normal_content(xL, xR, c, a, d, inv3R):
+    """Integral of uN = d - (x - c)^2 / R over the cell's part in contact (inv3R = 1/(3R))."""
     lo = max(xL, c - a)
     hi = min(xR, c + a)
     if hi <= lo:
         return 0.0
-    zl = lo - c
-    zh = hi - c
-    val = d * (hi - lo) - (zh * zh * zh - zl * zl * zl) / (3.0 * R)
+    val = _inner_content(lo - c, hi - c, d, inv3R)
     return val if val > 0.0 else 0.0
+
+
+@njit(cache=True, inline="always")
+def _inner_content(zl, zh, d, inv3R):
+    """Integral of d - z^2 / R over [zl, zh] (both inside the contact)."""
+    return (zh - zl) * (d - (zl * zl + zl * zh + zh * zh) * inv3R)
 
 
 @njit(cache=True, inline="always")
@@ -110,12 +119,13 @@ def _contact_range(c, a, x_lo, dx, n):
 
 
 @njit(cache=True)
-def _walk(U0, xL, xR, c0, a, u, dt, res):
+def _walk(U0, xL, xR, c0, a, u, inv_au, dt):
     """Exact creep integration of one cell over a sub-step (uniform-cell model).
 
-    Writes into ``res``: [A, B, IA, IB, e0, e1, e2] with
+    Returns (A, B, IA, IB, e0, e1, e2) with
     U_end = A + B s, integral of U dt = IA + IB s, released elastic energy (G* = 1)
-    = e0 + e1 s + e2 s^2.  The patch centre moves from c0 to c0 + u dt.
+    = e0 + e1 s + e2 s^2.  The patch centre moves from c0 to c0 + u dt; inv_au = 1/|u|
+    (unused when u = 0).
     """
     A = U0
     B = 0.0
@@ -126,14 +136,7 @@ def _walk(U0, xL, xR, c0, a, u, dt, res):
     e2 = 0.0
     if u == 0.0:
         ell = _overlap(xL, xR, c0, a)
-        res[0] = A
-        res[1] = ell * dt
-        res[2] = A * dt
-        res[3] = 0.5 * ell * dt * dt
-        res[4] = 0.0
-        res[5] = 0.0
-        res[6] = 0.0
-        return
+        return A, ell * dt, A * dt, 0.5 * ell * dt * dt, 0.0, 0.0, 0.0
     au = abs(u)
     if u > 0.0:
         pL = xL
@@ -150,28 +153,22 @@ def _walk(U0, xL, xR, c0, a, u, dt, res):
     b3 = pR + a
     wide = (pR - pL) <= 2.0 * a
     if p_end <= b0 or p >= b3:
-        res[0] = 0.0 if p >= b3 else A
-        res[1] = 0.0
-        res[2] = res[0] * dt
-        res[3] = 0.0
-        res[4] = 0.0
-        res[5] = 0.0
-        res[6] = 0.0
-        return
+        A = 0.0 if p >= b3 else A
+        return A, 0.0, A * dt, 0.0, 0.0, 0.0, 0.0
     # walk the pieces [b0, b1) entry, [b1, b2) full or both, [b2, b3) exit
     if p < b0:
         p = b0  # no contact before b0: nothing changes (U0 is 0 there)
     while p < p_end:
         if p < b1:
             q = min(b1, p_end)
-            dtp = (q - p) / au
+            dtp = (q - p) * inv_au
             la = p + a - pL
             IA += A * dtp
             IB += B * dtp + 0.5 * la * dtp * dtp + au * dtp * dtp * dtp / 6.0
             B += dtp * (la + 0.5 * au * dtp)
         elif p < b2:
             q = min(b2, p_end)
-            dtp = (q - p) / au
+            dtp = (q - p) * inv_au
             if wide:
                 ell = pR - pL
                 IA += A * dtp
@@ -195,7 +192,7 @@ def _walk(U0, xL, xR, c0, a, u, dt, res):
                 B = B * (1.0 - em1) + g * em1
         elif p < b3:
             q = min(b3, p_end)
-            dtp = (q - p) / au
+            dtp = (q - p) * inv_au
             la = pR + a - p
             lb = pR + a - q
             if la > 0.0:
@@ -219,13 +216,7 @@ def _walk(U0, xL, xR, c0, a, u, dt, res):
             A = 0.0
             B = 0.0
         p = q
-    res[0] = A
-    res[1] = B
-    res[2] = IA
-    res[3] = IB
-    res[4] = e0
-    res[5] = e1
-    res[6] = e2
+    return A, B, IA, IB, e0, e1, e2
 
 
 @njit(cache=True)
@@ -252,29 +243,147 @@ def _set_radius(U, st, p, a_new, d_new, mu):
     slip = 0.0
     snap = 0.0
     T = 0.0
-    for i in range(i0, i1 + 1):
-        xL = x_lo + i * dx
-        lo = _overlap(xL, xL + dx, c, a_old)
-        ln = _overlap(xL, xL + dx, c, a_new)
-        if lo > 0.0 and ln < lo:
-            Ui = U[i]
-            Un = Ui * ln / lo
-            rel += 0.5 * Ui * Ui / lo - (0.5 * Un * Un / ln if ln > 0.0 else 0.0)
-            U[i] = Un
-        if mu is not None and ln > 0.0:
-            Li = mu * p[P_E_OVER_G] * _normal_content(xL, xL + dx, c, a_new, d_new, p[P_R])
-            Ui = U[i]
-            if abs(Ui) > Li:
-                ex = abs(Ui) - Li
-                slip += Li * ex / ln
-                snap += 0.5 * ex * ex / ln
-                U[i] = Li if Ui > 0.0 else -Li
-        T += U[i]
+    if mu is None:
+        # only the cells at the two edges lose material; the others keep their content
+        j0, j1 = _contact_range(c, a_new, x_lo, dx, n)
+        if a_new <= 0.0 or j1 - j0 < 2:
+            j0, j1 = i1 + 1, i1
+        else:
+            j0 += 1
+            j1 -= 1
+        T = st[ST_T]
+        for k in range(i0, i1 + 1 - (j1 - j0 + 1)):
+            i = k if k < j0 else k + (j1 - j0 + 1)
+            xL = x_lo + i * dx
+            lo = _overlap(xL, xL + dx, c, a_old)
+            ln = _overlap(xL, xL + dx, c, a_new)
+            if lo > 0.0 and ln < lo:
+                Ui = U[i]
+                Un = Ui * ln / lo
+                rel += 0.5 * Ui * Ui / lo - (0.5 * Un * Un / ln if ln > 0.0 else 0.0)
+                U[i] = Un
+                T += Un - Ui
+        if a_new <= 0.0:
+            T = 0.0  # lift-off: every cell released
+    else:
+        inv3R = 1.0 / (3.0 * p[P_R])
+        muEG = mu * p[P_E_OVER_G]
+        for i in range(i0, i1 + 1):
+            xL = x_lo + i * dx
+            lo = _overlap(xL, xL + dx, c, a_old)
+            ln = _overlap(xL, xL + dx, c, a_new)
+            if lo > 0.0 and ln < lo:
+                Ui = U[i]
+                Un = Ui * ln / lo
+                rel += 0.5 * Ui * Ui / lo - (0.5 * Un * Un / ln if ln > 0.0 else 0.0)
+                U[i] = Un
+            if ln > 0.0:
+                Li = muEG * _normal_content(xL, xL + dx, c, a_new, d_new, inv3R)
+                Ui = U[i]
+                if abs(Ui) > Li:
+                    ex = abs(Ui) - Li
+                    slip += Li * ex / ln
+                    snap += 0.5 * ex * ex / ln
+                    U[i] = Li if Ui > 0.0 else -Li
+            T += U[i]
     st[ST_REL] += rel
     st[ST_SLIP] += slip
     st[ST_SNAP] += snap
     st[ST_T] = T
     return slip
+
+
+@njit(cache=True, inline="always")
+def _clip_slope(Ut, Li, Bi):
+    """Content clipped to the friction limit +-Li and its slope dU/ds (Bi stuck, 0 sliding)."""
+    Uc = min(max(Ut, -Li), Li)  # branch-free; a NaN content still reaches the commit's check
+    return Uc, (Bi if Uc == Ut else 0.0)
+
+
+@njit(cache=True)
+def _solve_bracketed(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st):
+    """Safeguarded Newton/bisection for the runner velocity with finite friction.
+
+    Root in v of g(v) = mass (v - v0) - dt (T(s0 - v) + F), T the sum of the clipped contents
+    A_i + B_i s.  g is monotone and piecewise linear; the bracket is where every cell is
+    saturated on either side.  Starts from ``vv``.  The fast path in ``_tick`` (one Newton step
+    on the piece active at v0, verified in the commit pass) needs this only when the step
+    crosses a kink.
+    """
+    s_hi = -np.inf
+    s_lo = np.inf
+    SL = 0.0
+    for i in range(i0, i1 + 1):
+        Bi = B[i]
+        SL += L[i, 0]
+        if Bi > 0.0:
+            sh = (L[i, 0] - A[i]) / Bi
+            sl = (-L[i, 0] - A[i]) / Bi
+            if sh > s_hi:
+                s_hi = sh
+            if sl < s_lo:
+                s_lo = sl
+    if s_hi < s_lo:  # no cell in contact
+        s_hi = 0.0
+        s_lo = 0.0
+    v_lo = s0 - s_hi
+    v_hi = s0 - s_lo
+    if mass > 0.0:
+        v_lo = min(v_lo, v0 + dt * (F - SL) / mass)
+        v_hi = max(v_hi, v0 + dt * (F + SL) / mass)
+    vv = min(max(vv, v_lo), v_hi)
+    for _it in range(200):
+        st[ST_ITER] += 1.0
+        s = s0 - vv
+        Tt = 0.0
+        Ta = 0.0
+        dT = 0.0
+        for i in range(i0, i1 + 1):
+            Ut, dU = _clip_slope(A[i] + B[i] * s, L[i, 0], B[i])
+            dT += dU
+            Tt += Ut
+            Ta += abs(Ut)
+        g = mass * (vv - v0) - dt * (Tt + F)
+        if _converged(g, mass, vv, v0, dt, Ta, F):
+            break
+        if g > 0.0:
+            v_hi = vv
+        else:
+            v_lo = vv
+        if v_hi - v_lo <= 1e-15 * (abs(v_lo) + abs(v_hi)) + 1e-300:
+            break
+        gp = mass + dt * dT
+        vn = vv - g / gp if gp > 0.0 else 0.5 * (v_lo + v_hi)
+        if not (vn > v_lo and vn < v_hi):
+            vn = 0.5 * (v_lo + v_hi)
+        vv = vn
+    return vv
+
+
+@njit(cache=True, inline="always")
+def _converged(g, mass, vv, v0, dt, Ta, F):
+    """g is piecewise linear: converged when it vanishes to round-off of its terms."""
+    return abs(g) <= 1e-13 * (mass * (abs(vv) + abs(v0)) + dt * (Ta + abs(F))) + 1e-300
+
+
+@njit(cache=True, inline="always")
+def _inner_range(i0, i1, full_lo, full_hi, x_lo, dx):
+    """Cells j0..j1 of i0..i1 that lie inside [full_lo, full_hi] (inside the contact during the
+    whole sub-step), by the same floating-point test as the cell bounds; j1 = j0 - 1 when
+    there is none, with i0 <= j0 <= i1 + 1 so that i0..j0-1 and j1+1..i1 are the edge cells."""
+    j0 = min(max(int(math.ceil((full_lo - x_lo) / dx)), i0), i1 + 1)
+    while j0 <= i1 and x_lo + j0 * dx < full_lo:
+        j0 += 1
+    while j0 > i0 and x_lo + (j0 - 1) * dx >= full_lo:
+        j0 -= 1
+    j1 = min(max(int(math.floor((full_hi - x_lo) / dx)) - 1, j0 - 1), i1)
+    while j1 >= j0 and x_lo + j1 * dx + dx > full_hi:
+        j1 -= 1
+    while j1 < i1 and x_lo + (j1 + 1) * dx + dx <= full_hi:
+        j1 += 1
+    return j0, j1
+
+
 
 
 @njit(cache=True)
@@ -284,18 +393,38 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
     d: indentation, u: omega R (signed), v: sphere translation rate (signed),
     vs_presc: runner velocity when ``mass is None`` (prescribed runner), else ignored.
     mu / mass / load: float or None (infinite friction / prescribed runner / no load).
+    L: work array of shape (n, N_LCOL) with finite friction (friction limit and the
+    released-energy coefficients of edge cells), unused otherwise.
+
+    Passes over the cells per sub-step: with infinite friction one build pass (A, B) and the
+    commit; with finite friction and a free runner the build pass also evaluates the runner
+    equation at v0, one Newton step gives the root of the piece active there, and the commit
+    verifies it (a kink crossed sends the sub-step to ``_solve_bracketed`` and commits again).
+    Cells inside the contact for the whole sub-step (A = U, B = dx dt) take a branch-free
+    loop; only the few edge cells are walked.
     """
     R = p[P_R]
     EG = p[P_E_OVER_G]
     x_lo = p[P_X_LO]
     dx = p[P_DX]
     n = U.shape[0]
-    res = np.empty(7)
+    inv3R = 1.0 / (3.0 * R)
+    inv_dx = 1.0 / dx
+    inv_au = 1.0 / abs(u) if u != 0.0 else 0.0
+    dxdt = dx * dt
+    muEG = 0.0
+    if mu is not None:
+        muEG = mu * EG
     a = math.sqrt(R * d) if d > 0.0 else 0.0
     slip_tick = _set_radius(U, st, p, a, d, mu)
     s0 = u - v
+    F = 0.0
+    if load is not None:
+        F = load
     imp_tick = 0.0
-    for _ in range(n_sub):
+    stuck = 0.0
+    for k_sub in range(n_sub):
+        last = k_sub == n_sub - 1
         c0 = st[ST_C]
         c1 = c0 + u * dt
         v0 = st[ST_VS]
@@ -317,144 +446,159 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
         E1 = 0.0
         E2 = 0.0
         SL = 0.0
+        # runner equation evaluated at v0 (finite friction, free runner)
+        sv0 = s0 - v0
+        Tt0 = 0.0
+        dT0 = 0.0
         if a > 0.0:
-            for i in range(i0, i1 + 1):
-                xL = x_lo + i * dx
-                xR = xL + dx
-                if xL >= full_lo and xR <= full_hi:
-                    Ai = U[i]
-                    Bi = dx * dt
-                    SIA += Ai * dt
-                    SIB += 0.5 * dx * dt * dt
-                else:
-                    _walk(U[i], xL, xR, c0, a, u, dt, res)
-                    Ai = res[0]
-                    Bi = res[1]
-                    SIA += res[2]
-                    SIB += res[3]
-                    E0 += res[4]
-                    E1 += res[5]
-                    E2 += res[6]
-                A[i] = Ai
-                B[i] = Bi
-                SA += Ai
-                SB += Bi
-                if mu is not None:
-                    Li = mu * EG * _normal_content(xL, xR, c1, a, d, R)
-                    L[i] = Li
-                    SL += Li
+            j0, j1 = _inner_range(i0, i1, full_lo, full_hi, x_lo, dx)
         else:
-            for i in range(i0, i1 + 1):
-                A[i] = 0.0
-                B[i] = 0.0
-                if mu is not None:
-                    L[i] = 0.0
+            j0 = i1 + 1
+            j1 = i1
+        n_in = j1 - j0 + 1
+        # ------------------------------------------------ build: inner cells (A = U, B = dx dt)
+        SU = 0.0
+        for i in range(j0, j1 + 1):
+            Ai = U[i]
+            A[i] = Ai
+            B[i] = dxdt
+            SU += Ai
+            if mu is not None:
+                zl = (x_lo + i * dx) - c1
+                Li = muEG * dx * (d - (zl * zl + zl * (zl + dx) + (zl + dx) * (zl + dx)) * inv3R)
+                if Li < 0.0:
+                    Li = 0.0
+                L[i, 0] = Li
+                SL += Li
+                if mass is not None:
+                    Ut, dU = _clip_slope(Ai + dxdt * sv0, Li, dxdt)
+                    Tt0 += Ut
+                    dT0 += dU
+        if n_in > 0:
+            SA += SU
+            SB += n_in * dxdt
+            SIA += SU * dt
+            SIB += n_in * 0.5 * dxdt * dt
+        # ------------------------------------------------ build: edge cells (walked)
+        for k in range(i0, i1 + 1 - n_in):
+            i = k if k < j0 else k + n_in
+            xL = x_lo + i * dx
+            xR = xL + dx
+            if a > 0.0:
+                Ai, Bi, IA, IB, e0, e1, e2 = _walk(U[i], xL, xR, c0, a, u, inv_au, dt)
+                SIA += IA
+                SIB += IB
+                if mu is None:
+                    E0 += e0
+                    E1 += e1
+                    E2 += e2
+                else:
+                    L[i, 1] = e0
+                    L[i, 2] = e1
+                    L[i, 3] = e2
+            else:
+                Ai = 0.0
+                Bi = 0.0
+            A[i] = Ai
+            B[i] = Bi
+            SA += Ai
+            SB += Bi
+            if mu is not None:
+                Li = muEG * _normal_content(xL, xR, c1, a, d, inv3R) if a > 0.0 else 0.0
+                L[i, 0] = Li
+                SL += Li
+                if mass is not None:
+                    Ut, dU = _clip_slope(Ai + Bi * sv0, Li, Bi)
+                    Tt0 += Ut
+                    dT0 += dU
         # ---------------------------------------------------------------- runner velocity
+        fast = True
         if mass is None:
             v1 = vs_presc
-        else:
-            F = 0.0
-            if load is not None:
-                F = load
-            if mu is None:
-                den = mass + dt * SB
-                if den > 0.0:
-                    v1 = (mass * v0 + dt * (SA + s0 * SB + F)) / den
-                else:
-                    v1 = 0.0  # massless runner without contact (F must be 0)
+        elif mu is None:
+            den = mass + dt * SB
+            if den > 0.0:
+                v1 = (mass * v0 + dt * (SA + s0 * SB + F)) / den
             else:
-                # bracket in v: all cells saturated on either side
-                s_hi = -np.inf
-                s_lo = np.inf
-                for i in range(i0, i1 + 1):
-                    Bi = B[i]
-                    if Bi > 0.0:
-                        sh = (L[i] - A[i]) / Bi
-                        sl = (-L[i] - A[i]) / Bi
-                        if sh > s_hi:
-                            s_hi = sh
-                        if sl < s_lo:
-                            s_lo = sl
-                if s_hi < s_lo:  # no cell in contact
-                    s_hi = 0.0
-                    s_lo = 0.0
-                v_lo = s0 - s_hi
-                v_hi = s0 - s_lo
-                if mass > 0.0:
-                    v_lo = min(v_lo, v0 + dt * (F - SL) / mass)
-                    v_hi = max(v_hi, v0 + dt * (F + SL) / mass)
-                if mass == 0.0 and SL <= abs(F) and (SL > 0.0 or F != 0.0):
-                    st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_SLIDE
-                vv = min(max(v0, v_lo), v_hi)
-                for _it in range(200):
-                    st[ST_ITER] += 1.0
-                    s = s0 - vv
-                    Tt = 0.0
-                    Ta = 0.0
-                    dT = 0.0
-                    for i in range(i0, i1 + 1):
-                        Ut = A[i] + B[i] * s
-                        Li = L[i]
-                        if Ut > Li:
-                            Ut = Li
-                        elif Ut < -Li:
-                            Ut = -Li
-                        else:
-                            dT += B[i]
-                        Tt += Ut
-                        Ta += abs(Ut)
-                    g = mass * (vv - v0) - dt * (Tt + F)
-                    # g is piecewise linear: converged when it vanishes to round-off of its terms
-                    if abs(g) <= 1e-13 * (mass * (abs(vv) + abs(v0)) + dt * (Ta + abs(F))) + 1e-300:
-                        break
-                    if g > 0.0:
-                        v_hi = vv
-                    else:
-                        v_lo = vv
-                    if v_hi - v_lo <= 1e-15 * (abs(v_lo) + abs(v_hi)) + 1e-300:
-                        break
-                    gp = mass + dt * dT
-                    vn = vv - g / gp if gp > 0.0 else 0.5 * (v_lo + v_hi)
-                    if not (vn > v_lo and vn < v_hi):
-                        vn = 0.5 * (v_lo + v_hi)
-                    vv = vn
-                v1 = vv
-        s = s0 - v1
+                v1 = 0.0  # massless runner without contact (F must be 0)
+        else:
+            if mass == 0.0 and SL <= abs(F) and (SL > 0.0 or F != 0.0):
+                st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_SLIDE
+            st[ST_ITER] += 1.0
+            g0 = -dt * (Tt0 + F)
+            gp = mass + dt * dT0
+            v1 = v0
+            if g0 != 0.0:
+                if gp > 0.0:
+                    v1 = v0 - g0 / gp  # root of the linear piece active at v0
+                else:
+                    fast = False
+                    v1 = _solve_bracketed(A, B, L, i0, i1, s0, v0, v0, mass, F, dt, st)
         # ---------------------------------------------------------------- commit
-        T1 = 0.0
-        slip = 0.0
-        rel = 0.0
-        clipped = False
-        for i in range(i0, i1 + 1):
-            Ut = A[i] + B[i] * s
-            if mu is not None:
-                Li = L[i]
-                xL = x_lo + i * dx
-                if a > 0.0 and not (xL >= full_lo and xL + dx <= full_hi):
-                    # an edge cell: the deflection it released this sub-step, from the
-                    # creep integral, can be no larger than the friction limit allows (the
-                    # released material is at the limit once the cell slides)
-                    _walk(U[i], xL, xL + dx, c0, a, u, dt, res)
-                    ei = res[4] + s * (res[5] + s * res[6])
-                    if abs(Ut) > Li and Ut != 0.0:
-                        ei *= (Li / Ut) * (Li / Ut)
-                    rel += ei
-                if Ut > Li:
-                    xL = x_lo + i * dx
-                    ell = _overlap(xL, xL + dx, c1, a)
-                    if ell > 0.0:
-                        slip += Li * (Ut - Li) / ell
-                    Ut = Li
-                    clipped = True
-                elif Ut < -Li:
-                    xL = x_lo + i * dx
-                    ell = _overlap(xL, xL + dx, c1, a)
-                    if ell > 0.0:
-                        slip += Li * (-Li - Ut) / ell
-                    Ut = -Li
-                    clipped = True
-            U[i] = Ut
-            T1 += Ut
+        for attempt in range(2):
+            s = s0 - v1
+            T1 = 0.0
+            Ta = 0.0
+            slip = 0.0
+            rel = 0.0
+            clipped = False
+            if last:
+                stuck = 0.0
+            # inner cells
+            for i in range(j0, j1 + 1):
+                Ut = A[i] + dxdt * s
+                if mu is not None:
+                    Li = L[i, 0]
+                    ex = abs(Ut) - Li
+                    if ex > 0.0:
+                        slip += Li * ex * inv_dx
+                        Ut = Li if Ut > 0.0 else -Li
+                        clipped = True
+                    elif last and ex < -1e-12 * Li:
+                        stuck += dx
+                    if mass is not None:
+                        Ta += abs(Ut)
+                U[i] = Ut
+                T1 += Ut
+            # edge cells
+            for k in range(i0, i1 + 1 - n_in):
+                i = k if k < j0 else k + n_in
+                Ut = A[i] + B[i] * s
+                if mu is not None:
+                    Li = L[i, 0]
+                    if a > 0.0:
+                        # the deflection an edge cell released this sub-step, from the creep
+                        # integral, can be no larger than the friction limit allows (the
+                        # released material is at the limit once the cell slides)
+                        ei = L[i, 1] + s * (L[i, 2] + s * L[i, 3])
+                        if abs(Ut) > Li and Ut != 0.0:
+                            ei *= (Li / Ut) * (Li / Ut)
+                        rel += ei
+                    ex = abs(Ut) - Li
+                    if ex > 0.0 or (last and ex < -1e-12 * Li):
+                        xL = x_lo + i * dx
+                        ell = _overlap(xL, xL + dx, c1, a)
+                        if ex > 0.0:
+                            # slip work: the limit times the slip of the cell's mean deflection
+                            if ell > 0.0:
+                                slip += Li * ex / ell
+                            Ut = Li if Ut > 0.0 else -Li
+                            clipped = True
+                        else:
+                            stuck += ell
+                    if mass is not None:
+                        Ta += abs(Ut)
+                U[i] = Ut
+                T1 += Ut
+            if mu is None or mass is None or not fast:
+                break
+            # verify the one-step root: g(v1) vanishes unless the step crossed a kink
+            st[ST_ITER] += 1.0
+            g1 = mass * (v1 - v0) - dt * (T1 + F)
+            if _converged(g1, mass, v1, v0, dt, Ta, F):
+                break
+            fast = False
+            v1 = _solve_bracketed(A, B, L, i0, i1, s0, v0, v1, mass, F, dt, st)
         if clipped:
             imp = 0.5 * (T0 + T1) * dt  # some cells slid: trapezoid on the clipped force
         else:
@@ -485,18 +629,11 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
     out[OUT_SLIP] = slip_tick
     out[OUT_C] = st[ST_C]
     out[OUT_N] = 4.0 / 3.0 * EG * a * d
-    # stuck fraction of the contact length
+    # stuck fraction of the contact length (counted in the last commit)
     if mu is None or a == 0.0:
         out[OUT_STICK] = 1.0 if a > 0.0 else 0.0
     else:
-        c = st[ST_C]
-        i0, i1 = _contact_range(c, a, x_lo, dx, n)
-        stuck = 0.0
-        for i in range(i0, i1 + 1):
-            if abs(U[i]) < L[i] * (1.0 - 1e-12):
-                xL = x_lo + i * dx
-                stuck += _overlap(xL, xL + dx, c, a)
-        out[OUT_STICK] = stuck / (2.0 * a)
+        out[OUT_STICK] = min(stuck / (2.0 * a), 1.0)
     if not (math.isfinite(T1) and math.isfinite(st[ST_VS]) and math.isfinite(st[ST_XS])):
         st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_NONFINITE
 
@@ -546,5 +683,5 @@ def normal_force_sum(st, p, n):
     total = 0.0
     for i in range(i0, i1 + 1):
         xL = x_lo + i * dx
-        total += _normal_content(xL, xL + dx, c, a, d, p[P_R])
+        total += _normal_content(xL, xL + dx, c, a, d, 1.0 / (3.0 * p[P_R]))
     return p[P_E_OVER_G] * total

@@ -124,7 +124,7 @@ class RollingDriveEnv(gym.Env):
         self._target = np.zeros(1)
         self._steps = np.zeros(1, dtype=np.int64)
         self._out = np.zeros((1, K.N_OUT))
-        self._obs = np.zeros((1, EK.N_OBS))
+        self._obs = np.zeros((1, EK.N_OBS), dtype=np.float32)
         self._extra = np.zeros((1, EK.N_X))
         self._history = []
 
@@ -142,21 +142,27 @@ class RollingDriveEnv(gym.Env):
         self._extra[0, EK.X_SAT] = 1.0
         EK.reset_obs(0, self._sv, self._target, self._obs)
         self._history = [0.0]
-        return self._obs[0].astype(np.float32), self._info()
+        return self._obs[0].copy(), self._info()
 
     def step(self, action):
-        self._act[0] = check_actions(action, (3,))
+        a = np.asarray(action)
+        if a.shape != (3,) or a.dtype.kind not in "fiub":
+            check_actions(a, (3,))  # raises with the reason
+        self._act[0] = a
         U, A, B, L, st, p = self._arrays
-        EK.env_step_serial(self._act, self._sv, self._target, self._steps, U, A, B, L, st, p,
-                           self._out, self._obs, self._extra, *self._features)
+        bad = EK.env_step_serial(self._act, self._sv, self._target, self._steps, U, A, B, L, st,
+                                 p, self._out, self._obs, self._extra, *self._features)
         x = self._extra[0]
-        if not (math.isfinite(x[EK.X_REWARD]) and math.isfinite(x[EK.X_VS])):
+        if bad:
+            if bad < 0:
+                check_actions(a, (3,))  # raises with the reason
+                raise ValueError("action must be finite and inside [-1, 1]")
+            self.drive._check_flags()
             raise FloatingPointError("non-finite state after a physics tick")
-        self.drive._check_flags()
         self._history.append(x[EK.X_XS])
         if self.render_mode == "human":
             self.render()
-        return self._obs[0].astype(np.float32), float(x[EK.X_REWARD]), False, False, self._info()
+        return self._obs[0].copy(), float(x[EK.X_REWARD]), False, False, self._info()
 
     def render(self):
         if self.render_mode is None:

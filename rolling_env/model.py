@@ -130,7 +130,8 @@ class Drive:
         self.U = np.zeros(n)
         self.A = np.zeros(n)
         self.B = np.zeros(n)
-        self.L = np.zeros(n if finite_mu else 1)  # no friction limits without friction
+        # friction work array (limits, edge release coefficients): none without friction
+        self.L = np.zeros((n if finite_mu else 1, K.N_LCOL))
         self.st = np.zeros(K.N_STATE)
 
     @property

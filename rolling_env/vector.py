@@ -47,14 +47,14 @@ class BatchCore:
         self.U = np.zeros((n, m))
         self.A = np.zeros((n, m))
         self.B = np.zeros((n, m))
-        self.L = np.zeros((n, drive.L.shape[0]))
+        self.L = np.zeros((n,) + drive.L.shape)
         self.st = np.zeros((n, K.N_STATE))
         self.p = np.tile(drive._p, (n, 1))
         self.target = np.zeros(n)
         self.steps = np.zeros(n, dtype=np.int64)
         self.act = np.zeros((n, 3))
         self.out = np.zeros((n, K.N_OUT))
-        self.obs = np.zeros((n, EK.N_OBS))
+        self.obs = np.zeros((n, EK.N_OBS), dtype=np.float32)
         self.extra = np.zeros((n, EK.N_X))
         self.rngs = [seeding.np_random(None)[0] for _ in range(n)]
         self._step_fn = EK.env_step_parallel if n >= PARALLEL_MIN_ENVS else EK.env_step_serial
@@ -78,17 +78,23 @@ class BatchCore:
 
     def step(self, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Advance every env one tick; returns (obs float32, rewards, truncated)."""
-        self.act[:] = check_actions(actions, (self.num_envs, 3))
-        self._step_fn(self.act, self.sv, self.target, self.steps, self.U, self.A, self.B,
-                      self.L, self.st, self.p, self.out, self.obs, self.extra, *self.features)
-        rewards = self.extra[:, EK.X_REWARD].copy()
-        if not np.all(np.isfinite(rewards)) or not np.all(np.isfinite(self.extra[:, EK.X_VS])):
+        a = np.asarray(actions)
+        if a.shape != (self.num_envs, 3) or a.dtype.kind not in "fiub":
+            check_actions(a, (self.num_envs, 3))  # raises with the reason
+        self.act[:] = a
+        bad = self._step_fn(self.act, self.sv, self.target, self.steps, self.U, self.A, self.B,
+                            self.L, self.st, self.p, self.out, self.obs, self.extra,
+                            *self.features)
+        if bad:
+            if bad < 0:
+                check_actions(a, (self.num_envs, 3))  # raises with the reason
+                raise ValueError("action must be finite and inside [-1, 1]")
+            flags = self.st[:, K.ST_FLAG].astype(np.int64)
+            if np.any(flags & (K.FLAG_GRID | K.FLAG_NONFINITE)):
+                raise FloatingPointError(f"kernel error flags {np.unique(flags)}")
             raise FloatingPointError("non-finite state after a physics tick")
-        flags = self.st[:, K.ST_FLAG].astype(np.int64)
-        if np.any(flags & (K.FLAG_GRID | K.FLAG_NONFINITE)):
-            raise FloatingPointError(f"kernel error flags {np.unique(flags)}")
-        truncated = self.steps >= self.max_episode_steps
-        return self.obs.astype(np.float32), rewards, truncated
+        return self.obs.copy(), self.extra[:, EK.X_REWARD].copy(), \
+            self.steps >= self.max_episode_steps
 
     def info(self, i: int) -> dict:
         return info_dict(self.extra[i], self.target[i])
@@ -134,7 +140,7 @@ class RollingDriveVectorEnv(_gym_vector_base()):
             self.action_space.seed(seed)
         self.core.reset(None, options)
         self._autoreset[:] = False
-        return self.core.obs.astype(np.float32), self._infos(np.ones(self.num_envs, bool))
+        return self.core.obs.copy(), self._infos(np.ones(self.num_envs, bool))
 
     def step(self, actions):
         actions = np.asarray(actions, dtype=np.float64)
@@ -144,7 +150,7 @@ class RollingDriveVectorEnv(_gym_vector_base()):
         if was_done.any():
             self.core.reset(was_done)  # the envs that ended last step start over instead
             self.core.steps[was_done] = 0
-            obs = self.core.obs.astype(np.float32)
+            obs = self.core.obs.copy()
             rew[was_done] = 0.0
             trunc[was_done] = False
         term = np.zeros(self.num_envs, dtype=bool)
@@ -188,7 +194,7 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
         self._reset_seeds()
         self._reset_options()
         self.reset_infos = [self.core.info(i) for i in range(self.num_envs)]
-        return self.core.obs.astype(np.float32)
+        return self.core.obs.copy()
 
     def step_async(self, actions):
         self._actions = actions
@@ -196,15 +202,15 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
     def step_wait(self):
         obs, rew, trunc = self.core.step(self._actions)
         x = self.core.extra
-        infos = [{"reward_track": x[i, EK.X_TRACK], "reward_wear": x[i, EK.X_WEAR]}
-                 for i in range(self.num_envs)]
+        infos = [{"reward_track": tr, "reward_wear": we} for tr, we in
+                 zip(x[:, EK.X_TRACK].tolist(), x[:, EK.X_WEAR].tolist())]
         if trunc.any():
             ended = np.flatnonzero(trunc)
             for i in ended:
                 infos[i]["terminal_observation"] = obs[i].copy()
                 infos[i]["TimeLimit.truncated"] = True
             self.core.reset(trunc)
-            obs = self.core.obs.astype(np.float32)
+            obs = self.core.obs.copy()
         return obs, rew.astype(np.float32), trunc.copy(), infos
 
     def close(self):
