@@ -219,6 +219,20 @@ def _walk(U0, xL, xR, c0, a, u, inv_au, dt):
     return A, B, IA, IB, e0, e1, e2
 
 
+@njit(cache=True, inline="always")
+def _shrink_cell(U, i, xL, dx, c, a_old, a_new):
+    """Release the part of cell i cut off when the contact shrinks from a_old to a_new (uniform
+    content).  Returns (released elastic energy, change of content, new overlap)."""
+    lo = _overlap(xL, xL + dx, c, a_old)
+    ln = _overlap(xL, xL + dx, c, a_new)
+    if lo > 0.0 and ln < lo:
+        Ui = U[i]
+        Un = Ui * ln / lo
+        U[i] = Un
+        return 0.5 * Ui * Ui / lo - (0.5 * Un * Un / ln if ln > 0.0 else 0.0), Un - Ui, ln
+    return 0.0, 0.0, ln
+
+
 @njit(cache=True)
 def _set_radius(U, st, p, a_new, d_new, mu):
     """Instantaneous change of the indentation to d_new (contact half-width a_new).
@@ -254,15 +268,9 @@ def _set_radius(U, st, p, a_new, d_new, mu):
         T = st[ST_T]
         for k in range(i0, i1 + 1 - (j1 - j0 + 1)):
             i = k if k < j0 else k + (j1 - j0 + 1)
-            xL = x_lo + i * dx
-            lo = _overlap(xL, xL + dx, c, a_old)
-            ln = _overlap(xL, xL + dx, c, a_new)
-            if lo > 0.0 and ln < lo:
-                Ui = U[i]
-                Un = Ui * ln / lo
-                rel += 0.5 * Ui * Ui / lo - (0.5 * Un * Un / ln if ln > 0.0 else 0.0)
-                U[i] = Un
-                T += Un - Ui
+            e_rel, dU, _ = _shrink_cell(U, i, x_lo + i * dx, dx, c, a_old, a_new)
+            rel += e_rel
+            T += dU
         if a_new <= 0.0:
             T = 0.0  # lift-off: every cell released
     else:
@@ -270,13 +278,8 @@ def _set_radius(U, st, p, a_new, d_new, mu):
         muEG = mu * p[P_E_OVER_G]
         for i in range(i0, i1 + 1):
             xL = x_lo + i * dx
-            lo = _overlap(xL, xL + dx, c, a_old)
-            ln = _overlap(xL, xL + dx, c, a_new)
-            if lo > 0.0 and ln < lo:
-                Ui = U[i]
-                Un = Ui * ln / lo
-                rel += 0.5 * Ui * Ui / lo - (0.5 * Un * Un / ln if ln > 0.0 else 0.0)
-                U[i] = Un
+            e_rel, _, ln = _shrink_cell(U, i, xL, dx, c, a_old, a_new)
+            rel += e_rel
             if ln > 0.0:
                 Li = muEG * _normal_content(xL, xL + dx, c, a_new, d_new, inv3R)
                 Ui = U[i]
