@@ -63,7 +63,7 @@ def _env_tick(e, act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu,
     ts = t0 / L0
     n_sub = int(sv[S_NSUB])
     K._tick(U[e], A[e], B[e], L[e], ste, p[e], d / L0, u * ts, v * ts, 0.0, mu, mass, load,
-            n_sub, dt / n_sub / t0, out[e])
+            n_sub, dt / n_sub / t0, out[e], None)
     steps[e] += 1
     oe = out[e]
     xs = ste[K.ST_XS] * L0

@@ -118,7 +118,7 @@ def _contact_range(c, a, x_lo, dx, n):
     return i0, i1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _walk(U0, xL, xR, c0, a, u, inv_au, dt):
     """Exact creep integration of one cell over a sub-step (uniform-cell model).
 
@@ -390,7 +390,7 @@ def _inner_range(i0, i1, full_lo, full_hi, x_lo, dx):
 
 
 @njit(cache=True)
-def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
+def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
     """Advance one control tick of n_sub sub-steps with piecewise-constant inputs.
 
     d: indentation, u: omega R (signed), v: sphere translation rate (signed),
@@ -398,6 +398,10 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
     mu / mass / load: float or None (infinite friction / prescribed runner / no load).
     L: work array of shape (n, N_LCOL) with finite friction (friction limit and the
     released-energy coefficients of edge cells), unused otherwise.
+    ledger: True keeps the impulse and the energy ledger (``ST_IMP``, ``ST_REL``,
+    ``ST_DRIVE``, ``ST_RUNNER``, ``ST_EXT``, ``OUT_IMP``); None leaves them out (the env needs
+    neither: its observation, reward and info use T, v*, x*, the slip work and the stuck
+    fraction, which are the same either way).
 
     Passes over the cells per sub-step: with infinite friction one build pass (A, B) and the
     commit; with finite friction and a free runner the build pass also evaluates the runner
@@ -480,8 +484,9 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
         if n_in > 0:
             SA += SU
             SB += n_in * dxdt
-            SIA += SU * dt
-            SIB += n_in * 0.5 * dxdt * dt
+            if ledger is not None:
+                SIA += SU * dt
+                SIB += n_in * 0.5 * dxdt * dt
         # ------------------------------------------------ build: edge cells (walked)
         for k in range(i0, i1 + 1 - n_in):
             i = k if k < j0 else k + n_in
@@ -489,16 +494,17 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
             xR = xL + dx
             if a > 0.0:
                 Ai, Bi, IA, IB, e0, e1, e2 = _walk(U[i], xL, xR, c0, a, u, inv_au, dt)
-                SIA += IA
-                SIB += IB
-                if mu is None:
-                    E0 += e0
-                    E1 += e1
-                    E2 += e2
-                else:
-                    L[i, 1] = e0
-                    L[i, 2] = e1
-                    L[i, 3] = e2
+                if ledger is not None:
+                    SIA += IA
+                    SIB += IB
+                    if mu is None:
+                        E0 += e0
+                        E1 += e1
+                        E2 += e2
+                    else:
+                        L[i, 1] = e0
+                        L[i, 2] = e1
+                        L[i, 3] = e2
             else:
                 Ai = 0.0
                 Bi = 0.0
@@ -569,7 +575,7 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
                 Ut = A[i] + B[i] * s
                 if mu is not None:
                     Li = L[i, 0]
-                    if a > 0.0:
+                    if ledger is not None and a > 0.0:
                         # the deflection an edge cell released this sub-step, from the creep
                         # integral, can be no larger than the friction limit allows (the
                         # released material is at the limit once the cell slides)
@@ -602,31 +608,32 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
                 break
             fast = False
             v1 = _solve_bracketed(A, B, L, i0, i1, s0, v0, v1, mass, F, dt, st)
-        if clipped:
-            imp = 0.5 * (T0 + T1) * dt  # some cells slid: trapezoid on the clipped force
-        else:
-            imp = SIA + SIB * s  # no slip: exact integral of T over the sub-step
         st[ST_C] = c1
         st[ST_VS] = v1
         st[ST_XS] += v1 * dt
         st[ST_XSPH] += v * dt
         st[ST_T] = T1
-        st[ST_IMP] += imp
         st[ST_SLIP] += slip
-        if mu is None:
-            st[ST_REL] += E0 + s * (E1 + s * E2)
-        else:
-            st[ST_REL] += rel
-        st[ST_DRIVE] += s0 * imp
-        st[ST_RUNNER] += v1 * imp
-        if load is not None:
-            st[ST_EXT] += load * v1 * dt
+        if ledger is not None:
+            if clipped:
+                imp = 0.5 * (T0 + T1) * dt  # some cells slid: trapezoid on the clipped force
+            else:
+                imp = SIA + SIB * s  # no slip: exact integral of T over the sub-step
+            st[ST_IMP] += imp
+            if mu is None:
+                st[ST_REL] += E0 + s * (E1 + s * E2)
+            else:
+                st[ST_REL] += rel
+            st[ST_DRIVE] += s0 * imp
+            st[ST_RUNNER] += v1 * imp
+            if load is not None:
+                st[ST_EXT] += load * v1 * dt
+            imp_tick += imp
         st[ST_TIME] += dt
         slip_tick += slip
-        imp_tick += imp
     T1 = st[ST_T]
     out[OUT_T] = T1
-    out[OUT_IMP] = imp_tick
+    out[OUT_IMP] = imp_tick  # 0 without the ledger
     out[OUT_VS] = st[ST_VS]
     out[OUT_XS] = st[ST_XS]
     out[OUT_SLIP] = slip_tick
@@ -645,7 +652,7 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out):
 def run_ticks(U, A, B, L, st, p, d, u, v, vs, mu, mass, load, n_sub, dt, out):
     """Run len(d) ticks; out has shape (len(d), N_OUT).  Stops at the first error flag."""
     for k in range(d.shape[0]):
-        _tick(U, A, B, L, st, p, d[k], u[k], v[k], vs[k], mu, mass, load, n_sub, dt, out[k])
+        _tick(U, A, B, L, st, p, d[k], u[k], v[k], vs[k], mu, mass, load, n_sub, dt, out[k], True)
         if st[ST_FLAG] != 0.0 and (int(st[ST_FLAG]) & (FLAG_NONFINITE | FLAG_GRID)) != 0:
             return k + 1
     return d.shape[0]

@@ -133,6 +133,7 @@ class Drive:
         # friction work array (limits, edge release coefficients): none without friction
         self.L = np.zeros((n if finite_mu else 1, K.N_LCOL))
         self.st = np.zeros(K.N_STATE)
+        self.ledger = True  # run() keeps the impulse and energy ledger; the env kernel does not
 
     @property
     def kernel_features(self):
@@ -233,6 +234,9 @@ class Drive:
         load drop; O(dt) otherwise).  ``residual`` = drive + ext - (elastic + release + slip
         + kinetic), i.e. energy lost to discretisation (positive) or created (negative).
         """
+        if not self.ledger:
+            raise RuntimeError("this drive is stepped by the env kernel, which leaves the energy "
+                               "ledger out of the computation; use Drive.run for energies")
         st, W0 = self.st, self.W0
         elastic = float(K.elastic_energy(self.U, st, self._p)) * W0
         m = self.params.m

@@ -224,3 +224,13 @@ def test_kernel_action_mapping_matches_documented_mapping():
         assert abs(info["N"] - N) < 1e-12 * N and info["omega_R"] == u and info["v"] == v
         back = from_controls(env.scene, N, u, 1 - v / u)
         assert np.allclose(back, a, atol=1e-6)
+
+
+def test_env_leaves_the_energy_ledger_out_and_says_so():
+    """The env kernel skips the impulse/energy bookkeeping the env does not use; asking the env's
+    drive for energies is an error, not silent zeros."""
+    env = gym.make("RollingDrive-v0")
+    env.reset(seed=0)
+    env.step(np.array([0.5, 0.5, 0.1], np.float32))
+    with pytest.raises(RuntimeError, match="ledger"):
+        env.unwrapped.drive.energy
