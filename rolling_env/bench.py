@@ -20,10 +20,27 @@ import time
 
 import numpy as np
 
-CPU_HZ_GUESS = 3.0e9
-# rough operation counts per cell update: overlap + creep coefficients (A, B) + commit, plus
-# the friction limit (a cubic) and ~2 Newton passes with finite friction
-FLOPS_PER_CELL = {"finite_mu": 40, "infinite_mu": 15}
+CPU_HZ_FALLBACK = 3.0e9  # when /proc/cpuinfo gives no clock
+FP_PER_CYCLE = 4  # scalar double-precision operations per cycle (2 add + 2 mul pipes, no SIMD)
+STORES_PER_CYCLE = 1
+# the minimal update of one cell inside the contact per sub-step (build + commit, see
+# _kernel._tick): with friction the friction limit (a quadratic, 13 operations), clip and slope
+# (4), content and sums (6), commit with clip, slip and sums (13), storing A, B, L and U;
+# without friction a copy, the creep update and two sums, storing A, B and U
+OPS_PER_CELL = {"finite_mu": 36, "infinite_mu": 6}
+STORES_PER_CELL = {"finite_mu": 4, "infinite_mu": 3}
+
+
+def core_hz() -> float:
+    """Nominal core clock from /proc/cpuinfo (Linux), else CPU_HZ_FALLBACK."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("cpu MHz"):
+                    return float(line.split(":")[1]) * 1e6
+    except (OSError, ValueError, IndexError):
+        pass
+    return CPU_HZ_FALLBACK
 
 
 def _steps_per_second(env, n, seed=0, repeats=3):
@@ -92,23 +109,59 @@ def _vec_rate(env, n_envs, ticks, step, seed=0, repeats=3):
     return ticks * n_envs / best
 
 
+def _limit(finite_mu: bool) -> float:
+    """Rough machine limit in cell updates/s: the core clock over the cycles one cell update
+    needs at best, the larger of its FP operations / FP_PER_CYCLE and its stores /
+    STORES_PER_CYCLE."""
+    key = "finite_mu" if finite_mu else "infinite_mu"
+    cycles = max(OPS_PER_CELL[key] / FP_PER_CYCLE, STORES_PER_CELL[key] / STORES_PER_CYCLE)
+    return core_hz() / cycles
+
+
 def kernel_throughput(ticks=20_000, scenes=None):
     import rolling_env
+    from . import _envkernel as EK
     from .vector import BatchCore
     rows = []
     for sc in scenes or rolling_env.list_scenes():
         core = BatchCore(64, scene=sc, max_episode_steps=10**9)
-        limit = CPU_HZ_GUESS / FLOPS_PER_CELL[
-            "finite_mu" if math.isfinite(core.scene.mu) else "infinite_mu"]
-        core._step_fn = __import__("rolling_env._envkernel", fromlist=["x"]).env_step_serial
+        limit = _limit(math.isfinite(core.scene.mu))
+        core._step_fn = EK.env_step_serial
         steps, cells = _core_rate(core, max(ticks // 64, 50))
         rows.append(dict(scene=sc, cell_updates_per_s=cells, limit=limit, fraction=cells / limit,
                          env_steps_per_s=steps))
     return rows
 
 
+def asymptotic_cell_rate(finite_mu: bool, resolution=128, n_sub=32, ticks=40):
+    """Cell updates/s of the kernel (``Drive.run``, energy ledger on) on a large contact rolling
+    at constant creep, where per-tick work and the walked edge cells no longer count: what the
+    per-cell arithmetic reaches, against the same machine limit."""
+    from .experiments import Geometry
+    from .model import Drive, DriveParams
+    geo = Geometry()
+    a1 = geo.a1
+    params = DriveParams(geo.R, geo.E_star, geo.G_star, mu=0.3 if finite_mu else math.inf, m=1e-3)
+    drv = Drive(params, a_ref=a1, resolution=resolution, stroke=(-6 * a1, 6 * a1), a_max=a1,
+                t_ref=geo.tau)
+    u = 8 * a1 / (ticks * geo.tau / 10)  # the patch travels 8 a1 in the run
+    k = ticks
+    kw = dict(dt_tick=geo.tau / 10, n_sub=n_sub, omega_R=np.full(k, u),
+              v=np.full(k, u * (1 - 1e-3)), d=np.full(k, a1 * a1 / geo.R))
+    best = math.inf
+    for _ in range(3):
+        drv.reset(c0=-4 * a1)
+        t = time.perf_counter()
+        drv.run(**kw)
+        best = min(best, time.perf_counter() - t)
+    cells = (2 * resolution + 2) * n_sub * k
+    rate = cells / best
+    return dict(cell_updates_per_s=rate, limit=_limit(finite_mu), fraction=rate / _limit(finite_mu))
+
+
 def specialisation(ticks=300, scenes=None):
-    """Scene kernel vs the same kernel with friction (mu 1e30), dynamics and load (0.0) on."""
+    """Scene kernel vs the same kernel with every feature on: friction (mu 1e30 where it is
+    infinite), load (0.0 where there is none) and the impulse/energy ledger."""
     import rolling_env
     from . import _kernel as K
     from .vector import BatchCore
@@ -116,8 +169,8 @@ def specialisation(ticks=300, scenes=None):
     for sc in scenes or rolling_env.list_scenes():
         spec = BatchCore(64, scene=sc, max_episode_steps=10**9)
         full = BatchCore(64, scene=sc, max_episode_steps=10**9)
-        mu, mass, load = full.features
-        full.features = (1e30 if mu is None else mu, mass, 0.0 if load is None else load)
+        mu, mass, load, _ = full.features
+        full.features = (1e30 if mu is None else mu, mass, 0.0 if load is None else load, True)
         if full.L.shape[1] == 1:
             full.L = np.zeros(full.U.shape + (K.N_LCOL,))
         for c in (spec, full):
@@ -214,6 +267,8 @@ def run(quick=False) -> dict:
     scenes = ["default", "heavy_inf_friction"] if quick else None
     res = {"env": env_vs_pendulum(10_000 if quick else 20_000, scenes),
            "kernel": kernel_throughput(2_000 if quick else 20_000, scenes),
+           "asymptotic": {"finite_mu": asymptotic_cell_rate(True),
+                          "infinite_mu": asymptotic_cell_rate(False)},
            "specialisation": specialisation(50 if quick else 300, scenes)}
     single = next(r["steps_per_s"] for r in res["env"] if r["scene"] == "default")
     res["batched"] = batched(64 if quick else 256, 50 if quick else 200, single,
@@ -232,18 +287,34 @@ def report(res) -> str:
     L += [f"| {r['scene']} | {r['steps_per_s']:,.0f} | {r['pendulum']:,.0f} | {r['ratio']:.2f} |"
           for r in res["env"]]
     L += ["", "## Kernel throughput (64 envs, serial kernel, random actions)", "",
-          f"Machine limit estimate: {CPU_HZ_GUESS / 1e9:g} GHz x 1 operation/cycle (scalar code "
-          "with branches, no SIMD across cells) / operations per cell update: "
-          f"~{FLOPS_PER_CELL['finite_mu']} with finite friction (overlap, creep coefficients, "
-          "friction limit, ~2 Newton passes, commit) = "
-          f"{CPU_HZ_GUESS / FLOPS_PER_CELL['finite_mu'] / 1e6:.0f} M/s, "
-          f"~{FLOPS_PER_CELL['infinite_mu']} with infinite friction (no limit, direct solve) = "
-          f"{CPU_HZ_GUESS / FLOPS_PER_CELL['infinite_mu'] / 1e6:.0f} M/s per core.  Cells "
-          "counted: 2a/dx + 2 per sub-step, from the commanded force.", "",
+          f"Machine limit estimate: the nominal core clock ({core_hz() / 1e9:.2f} GHz) over the "
+          "cycles of the minimal update of one cell inside the contact, the larger of its "
+          f"floating-point operations / {FP_PER_CYCLE} per cycle (scalar: two add and two mul "
+          f"pipes) and its stores / {STORES_PER_CYCLE} per cycle: "
+          f"{OPS_PER_CELL['finite_mu']} operations and {STORES_PER_CELL['finite_mu']} stores "
+          f"with friction = {_limit(True) / 1e6:.0f} M/s, {OPS_PER_CELL['infinite_mu']} "
+          f"operations and {STORES_PER_CELL['infinite_mu']} stores without = "
+          f"{_limit(False) / 1e6:.0f} M/s per core.  Cells counted: 2a/dx + 2 per sub-step, "
+          "from the commanded force.", "",
           "| scene | cell updates/s | fraction of limit | env steps/s |", "|---|---|---|---|"]
     L += [f"| {r['scene']} | {r['cell_updates_per_s'] / 1e6:.1f} M | {r['fraction']:.2f} | "
           f"{r['env_steps_per_s']:,.0f} |" for r in res["kernel"]]
+    asy = res.get("asymptotic")
+    if asy:
+        L += ["", "The same kernel on a large contact (256 cells, 32 sub-steps per tick, rolling at "
+              "constant creep, `Drive.run` with the energy ledger), where the per-tick work and "
+              "the few walked edge cells no longer count: "
+              f"{asy['finite_mu']['cell_updates_per_s'] / 1e6:.0f} M/s with friction "
+              f"({asy['finite_mu']['fraction']:.2f} of the limit), "
+              f"{asy['infinite_mu']['cell_updates_per_s'] / 1e6:.0f} M/s without "
+              f"({asy['infinite_mu']['fraction']:.2f}).  At 16 cells per radius the scenes' contacts "
+              "span at most 34 cells, so there the per-tick work (action mapping, load change, "
+              "observation) and the edge cells, walked exactly through their entry and exit, "
+              "take the rest."]
     L += ["", "## Scene specialisation (env steps/s, 64 envs, serial)", "",
+          "Every feature on: friction (mu = 1e30 where the scene has none), the load term "
+          "(F_ext = 0.0 where it has none) and the impulse/energy ledger, which the env never "
+          "needs.", "",
           "| scene | specialised kernel | every feature on | speed-up |", "|---|---|---|---|"]
     L += [f"| {r['scene']} | {r['specialised']:,.0f} | {r['all_features']:,.0f} | "
           f"{r['speedup']:.2f}x |" for r in res["specialisation"]]

@@ -115,7 +115,7 @@ class RollingDriveEnv(gym.Env):
         self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
         self.observation_space = spaces.Box(-OBS_BOUND, OBS_BOUND, (len(OBS_NAMES),), np.float32)
         self.dt = self.scene.dt
-        self._features = self.drive.kernel_features
+        self._features = self.drive.kernel_features + (None,)  # no energy ledger
         self._sv = EK.scene_vector(self.scene, self.a_max, self.drive)
         drv = self.drive
         # batch-of-one views of the drive's arrays for the env kernel

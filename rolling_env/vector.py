@@ -11,8 +11,8 @@ transitions are bit-identical to N single envs).  Two thin adapters:
 
 Seeding follows Gymnasium: env i of a batch seeded s behaves like a single env seeded s + i.
 The threaded kernel (``prange``) is used from ``PARALLEL_MIN_ENVS`` envs on: measured on the
-idle 2-core machine (default scene), threads give 1.2x at 4 envs, 1.9x at 64 and 2.0x at 256;
-for 1-2 envs the serial kernel is as fast (thread hand-off costs as much as the work).
+idle 2-core machine (default scene, ``rolling-drive bench``), threads give 0.9x at 1 env,
+1.0-1.2x at 2 (within the spread between runs), 1.3x at 4, 1.9x at 16 and 2.3x at 64-256.
 """
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ class BatchCore:
                                   else int(max_episode_steps))
         drive, self.a_max = build_drive(self.scene)
         self.drive = drive  # template (grid, scales)
-        self.features = drive.kernel_features
+        self.features = drive.kernel_features + (None,)  # (mu, mass, load, ledger)
         self.sv = EK.scene_vector(self.scene, self.a_max, drive)
         m = drive.grid.n
         self.U = np.zeros((n, m))
