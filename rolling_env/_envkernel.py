@@ -181,3 +181,12 @@ def scene_vector(scene, a_max: float, drive) -> np.ndarray:
     sv[[S_WTRACK, S_WWEAR, S_PERIOD, S_EPISODE, S_NSUB]] = (
         sc.w_track, sc.w_wear, sc.period, sc.episode_steps, sc.sub_steps)
     return sv
+
+
+def _keep_cache_in_step():
+    from ._cachestamp import drop_if_stale, sources_digest
+    cache_dir = getattr(env_step_serial._cache, "cache_path", None)
+    drop_if_stale(cache_dir, "_envkernel", sources_digest(K.__file__, __file__))
+
+
+_keep_cache_in_step()
