@@ -45,22 +45,18 @@ def parse_kwargs(text) -> dict:
 
 def make_vec_env(scene, n_envs: int, seed: int, env_kwargs: dict | None = None):
     """The training vector env, chosen here and only here: the natively batched
-    ``rolling_env.vector.RollingDriveVecEnv`` (one compiled call steps all envs; 3.3x the
-    single env at 8 envs, see results/benchmarks.md) when it is available, else SB3's
-    ``DummyVecEnv`` of single envs (``SubprocVecEnv`` is slower on 2 cores: IPC dominates);
-    wrapped in ``VecMonitor``.  Env i is seeded ``seed + i`` like SB3's make_vec_env."""
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
+    ``rolling_env.vector.RollingDriveVecEnv`` (one compiled call steps all envs), wrapped in
+    ``VecMonitor``.  It is faster than SB3's ``DummyVecEnv`` of single envs at every batch size
+    (2x at 1 env, about 6x at 8: ``rolling-drive bench``, results/benchmarks.md), and
+    ``SubprocVecEnv`` is slower still on 2 cores (IPC dominates).  Env i is seeded ``seed + i``
+    like SB3's make_vec_env."""
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from rolling_env.vector import RollingDriveVecEnv
 
     kw = dict(env_kwargs or {})
     kw.pop("scene", None)
-    try:
-        from rolling_env.vector import RollingDriveVecEnv
-    except ImportError:  # no batched env: one Python env per slot
-        import rolling_env
-        venv = DummyVecEnv([lambda: rolling_env.make(scene, **kw) for _ in range(n_envs)])
-    else:
-        venv = RollingDriveVecEnv(n_envs, scene=scene, **kw)
-    venv = VecMonitor(venv)
+    venv = VecMonitor(RollingDriveVecEnv(n_envs, scene=scene, **kw))
     venv.seed(seed)
     return venv
 

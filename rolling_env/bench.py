@@ -5,7 +5,8 @@
 * single env steps/s through ``gym.make`` vs Gymnasium's Pendulum-v1, measured the same way;
 * the naive plain-numpy spring row (tests/naive.py) at equal working-point accuracy;
 * scene specialisation: the scene's kernel vs the same kernel with every feature switched on;
-* batched env (256 envs) vs the single env, serial and threaded kernel;
+* batched env (256 envs) vs the single env, serial and threaded kernel, over batch sizes, and
+  through the Gymnasium and SB3 adapters; the SB3 training env vs a DummyVecEnv;
 * start-up (warm and cold numba cache) and peak memory (1 env, 1024 batched envs).
 """
 from __future__ import annotations
@@ -212,6 +213,27 @@ def batched(n_envs=256, ticks=200, single_rate=None, sizes=(1, 4, 16, 64, 256)):
     return out
 
 
+def sb3_training_env(sizes=(1, 8), ticks=2000):
+    """SB3 vector envs as the training scripts would build them: the batched
+    ``RollingDriveVecEnv`` vs SB3's ``DummyVecEnv`` of single envs, both in ``VecMonitor``."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
+
+    import rolling_env
+    from .vector import RollingDriveVecEnv
+    rows = []
+    for n in sizes:
+        rates = {}
+        for name, venv in (("batched", RollingDriveVecEnv(n)),
+                           ("dummy", DummyVecEnv([lambda: rolling_env.make("default")
+                                                  for _ in range(n)]))):
+            venv = VecMonitor(venv)
+            venv.seed(0)
+            venv.reset()
+            rates[name] = _vec_rate(venv, n, max(ticks // n, 200), venv.step)
+        rows.append(dict(num_envs=n, **rates))
+    return rows
+
+
 def naive_equal_accuracy():
     """Working point (0.7, 0.1, 2.5): ours at 8 springs/a1 (worst-case error 6.6e-3 over grid
     alignments) vs the naive row at 64 springs/a1 (1.1e-2): ours is the more accurate."""
@@ -273,6 +295,7 @@ def run(quick=False) -> dict:
     single = next(r["steps_per_s"] for r in res["env"] if r["scene"] == "default")
     res["batched"] = batched(64 if quick else 256, 50 if quick else 200, single,
                              (1, 64) if quick else (1, 2, 4, 16, 64, 256))
+    res["sb3"] = sb3_training_env()
     res["naive"] = naive_equal_accuracy()
     res["startup"] = startup_and_memory()
     return res
@@ -336,6 +359,12 @@ def report(res) -> str:
     L += [f"| {r['num_envs']} | {r['serial']:,.0f} | {r['threaded']:,.0f} | "
           f"{r['threaded'] / r['serial']:.2f} |" for r in b["sweep"]]
     L += ["", f"The batched env uses the threaded kernel from {_parallel_min()} envs on."]
+    if res.get("sb3"):
+        L += ["", "## Training env (SB3, default scene, both in VecMonitor)", "",
+              "| envs | RollingDriveVecEnv (batched, used by agents.train) | DummyVecEnv of "
+              "single envs | ratio |", "|---|---|---|---|"]
+        L += [f"| {r['num_envs']} | {r['batched']:,.0f} | {r['dummy']:,.0f} | "
+              f"{r['batched'] / r['dummy']:.1f}x |" for r in res["sb3"]]
     n = res["naive"]
     if n:
         L += ["", "## Naive plain-numpy spring row at equal accuracy (working point 0.7, 0.1, 2.5)",
