@@ -213,7 +213,7 @@ def batched(n_envs=256, ticks=200, single_rate=None, sizes=(1, 4, 16, 64, 256)):
     return out
 
 
-def sb3_training_env(sizes=(1, 8), ticks=2000):
+def sb3_training_env(sizes=(1, 8, 256), ticks=2000):
     """SB3 vector envs as the training scripts would build them: the batched
     ``RollingDriveVecEnv`` vs SB3's ``DummyVecEnv`` of single envs, both in ``VecMonitor``."""
     from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
@@ -295,7 +295,7 @@ def run(quick=False) -> dict:
     single = next(r["steps_per_s"] for r in res["env"] if r["scene"] == "default")
     res["batched"] = batched(64 if quick else 256, 50 if quick else 200, single,
                              (1, 64) if quick else (1, 2, 4, 16, 64, 256))
-    res["sb3"] = sb3_training_env()
+    res["sb3"] = sb3_training_env((1, 8) if quick else (1, 8, 256))
     res["naive"] = naive_equal_accuracy()
     res["startup"] = startup_and_memory()
     return res
