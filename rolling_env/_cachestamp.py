@@ -1,10 +1,16 @@
 """Keep numba's on-disk cache of the env kernels in step with the physics they embed.
 
-numba revalidates a cached function against the time stamp of *its own* source file only.  The
-env kernels in ``_envkernel.py`` compile ``_kernel.py``'s physics into their machine code, so
-after an edit of ``_kernel.py`` (or a ``git pull`` that changes only that file in an editable
-install) their cache would keep running the old physics.  ``drop_if_stale`` keeps a digest of
-the embedded sources beside the cache and deletes the dependent cache files when it changes.
+numba revalidates a cached function against a stamp of *its own* source file only, taken when
+the function is defined.  The env kernels in ``_envkernel.py`` compile ``_kernel.py``'s physics
+into their machine code, so after an edit of ``_kernel.py`` (or a ``git pull`` that changes
+only that file in an editable install) their cache would keep running the old physics.
+
+``bind_sources`` extends the stamp each env-kernel dispatcher checks and writes with a digest
+of every file it embeds.  Like numba's own stamp it is taken at import, per process, so a
+process that imported the old physics writes its cache entries under the old digest, and a
+process with the new physics ignores them (no race between processes).  If a numba version
+lacks the internals this relies on, ``drop_if_stale`` is the fallback: it deletes the
+dependent cache files when a digest stored beside them changed (not race-free).
 """
 from __future__ import annotations
 
@@ -18,6 +24,22 @@ def sources_digest(*files) -> str:
     for f in files:
         h.update(Path(f).read_bytes())
     return h.hexdigest()
+
+
+def bind_sources(dispatchers, digest: str) -> bool:
+    """Make each dispatcher's cache index valid only for ``digest`` (numba's own source stamp
+    plus the digest).  Returns False when numba's cache internals are not as expected."""
+    files = []
+    for d in dispatchers:
+        cf = getattr(getattr(d, "_cache", None), "_cache_file", None)
+        if cf is None or not hasattr(cf, "_source_stamp"):
+            return False
+        files.append(cf)
+    for cf in files:
+        base = cf._source_stamp
+        if not (isinstance(base, tuple) and len(base) == 2 and base[0] == "rolling_env"):
+            cf._source_stamp = ("rolling_env", (base, digest))
+    return True
 
 
 def drop_if_stale(cache_dir, prefix: str, digest: str) -> bool:

@@ -184,9 +184,12 @@ def scene_vector(scene, a_max: float, drive) -> np.ndarray:
 
 
 def _keep_cache_in_step():
-    from ._cachestamp import drop_if_stale, sources_digest
-    cache_dir = getattr(env_step_serial._cache, "cache_path", None)
-    drop_if_stale(cache_dir, "_envkernel", sources_digest(K.__file__, __file__))
+    """The cache of these kernels is valid only for the current _kernel.py (see _cachestamp)."""
+    from ._cachestamp import bind_sources, drop_if_stale, sources_digest
+    digest = sources_digest(K.__file__, __file__)
+    kernels = [f for f in globals().values() if hasattr(f, "_cache") and hasattr(f, "py_func")]
+    if not bind_sources(kernels, digest):
+        drop_if_stale(getattr(env_step_serial._cache, "cache_path", None), "_envkernel", digest)
 
 
 _keep_cache_in_step()

@@ -119,13 +119,13 @@ def _contact_range(c, a, x_lo, dx, n):
 
 
 @njit(cache=True, inline="always")
-def _walk(U0, xL, xR, c0, a, u, inv_au, dt):
+def _walk(U0, xL, xR, c0, a, u, dt):
     """Exact creep integration of one cell over a sub-step (uniform-cell model).
 
     Returns (A, B, IA, IB, e0, e1, e2) with
     U_end = A + B s, integral of U dt = IA + IB s, released elastic energy (G* = 1)
-    = e0 + e1 s + e2 s^2.  The patch centre moves from c0 to c0 + u dt; inv_au = 1/|u|
-    (unused when u = 0).
+    = e0 + e1 s + e2 s^2.  The patch centre moves from c0 to c0 + u dt.  Divides by |u|, not
+    by a precomputed 1/|u|, which would overflow for |u| below 1e-308.
     """
     A = U0
     B = 0.0
@@ -161,14 +161,14 @@ def _walk(U0, xL, xR, c0, a, u, inv_au, dt):
     while p < p_end:
         if p < b1:
             q = min(b1, p_end)
-            dtp = (q - p) * inv_au
+            dtp = (q - p) / au
             la = p + a - pL
             IA += A * dtp
             IB += B * dtp + 0.5 * la * dtp * dtp + au * dtp * dtp * dtp / 6.0
             B += dtp * (la + 0.5 * au * dtp)
         elif p < b2:
             q = min(b2, p_end)
-            dtp = (q - p) * inv_au
+            dtp = (q - p) / au
             if wide:
                 ell = pR - pL
                 IA += A * dtp
@@ -192,7 +192,7 @@ def _walk(U0, xL, xR, c0, a, u, inv_au, dt):
                 B = B * (1.0 - em1) + g * em1
         elif p < b3:
             q = min(b3, p_end)
-            dtp = (q - p) * inv_au
+            dtp = (q - p) / au
             la = pR + a - p
             lb = pR + a - q
             if la > 0.0:
@@ -417,7 +417,6 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
     n = U.shape[0]
     inv3R = 1.0 / (3.0 * R)
     inv_dx = 1.0 / dx
-    inv_au = 1.0 / abs(u) if u != 0.0 else 0.0
     dxdt = dx * dt
     muEG = 0.0
     if mu is not None:
@@ -493,7 +492,7 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
             xL = x_lo + i * dx
             xR = xL + dx
             if a > 0.0:
-                Ai, Bi, IA, IB, e0, e1, e2 = _walk(U[i], xL, xR, c0, a, u, inv_au, dt)
+                Ai, Bi, IA, IB, e0, e1, e2 = _walk(U[i], xL, xR, c0, a, u, dt)
                 if ledger is not None:
                     SIA += IA
                     SIB += IB
@@ -529,7 +528,9 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
             if den > 0.0:
                 v1 = (mass * v0 + dt * (SA + s0 * SB + F)) / den
             else:
-                v1 = 0.0  # massless runner without contact (F must be 0)
+                # massless runner without contact (F must be 0): any v* balances; take the
+                # limit of a vanishing contact, no creep (as the finite-friction solver does)
+                v1 = s0
         else:
             if mass == 0.0 and SL <= abs(F) and (SL > 0.0 or F != 0.0):
                 st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_SLIDE
@@ -537,12 +538,14 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
             g0 = -dt * (Tt0 + F)
             gp = mass + dt * dT0
             v1 = v0
-            if g0 != 0.0:
-                if gp > 0.0:
-                    v1 = v0 - g0 / gp  # root of the linear piece active at v0
-                else:
-                    fast = False
-                    v1 = _solve_bracketed(A, B, L, i0, i1, s0, v0, v0, mass, F, dt, st)
+            if gp <= 0.0:
+                # massless runner with every cell saturated (or no contact): g has no slope at
+                # v0; the bracketed solver picks the root (for no contact: the sphere's creep
+                # velocity, the limit of a vanishing contact)
+                fast = False
+                v1 = _solve_bracketed(A, B, L, i0, i1, s0, v0, v0, mass, F, dt, st)
+            elif g0 != 0.0:
+                v1 = v0 - g0 / gp  # root of the linear piece active at v0
         # ---------------------------------------------------------------- commit
         for attempt in range(2):
             s = s0 - v1

@@ -23,7 +23,7 @@ import numpy as np
 
 CPU_HZ_FALLBACK = 3.0e9  # when /proc/cpuinfo gives no clock
 FP_PER_CYCLE = 4  # scalar double-precision operations per cycle (2 add + 2 mul pipes, no SIMD)
-STORES_PER_CYCLE = 1
+STORES_PER_CYCLE = 2  # two store ports (AMD Zen 4/5, Intel since Ice Lake)
 # the minimal update of one cell inside the contact per sub-step (build + commit, see
 # _kernel._tick): with friction the friction limit (a quadratic, 13 operations), clip and slope
 # (4), content and sums (6), commit with clip, slip and sums (13), storing A, B, L and U;
@@ -33,7 +33,8 @@ STORES_PER_CELL = {"finite_mu": 4, "infinite_mu": 3}
 
 
 def core_hz() -> float:
-    """Nominal core clock from /proc/cpuinfo (Linux), else CPU_HZ_FALLBACK."""
+    """Core clock /proc/cpuinfo reports (Linux; often the base clock: boost runs faster), else
+    CPU_HZ_FALLBACK."""
     try:
         with open("/proc/cpuinfo") as f:
             for line in f:
@@ -203,6 +204,18 @@ def batched(n_envs=256, ticks=200, single_rate=None, sizes=(1, 4, 16, 64, 256)):
     out = dict(sweep=sweep, single=single_rate, num_envs=n_envs)
     top = next(r for r in sweep if r["num_envs"] == n_envs)
     out["serial"], out["threaded"] = top["serial"], top["threaded"]
+    # the prange kernel on one thread: separates what the threads give from what the
+    # parallel kernel's different generated code gives
+    import numba
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        core = BatchCore(n_envs, max_episode_steps=10**9)
+        core._step_fn = EK.env_step_parallel
+        out["threaded_1"], _ = _core_rate(core, ticks)
+    finally:
+        numba.set_num_threads(threads)
+    out["threads"] = threads
     genv = gym.make_vec("RollingDrive-v0", num_envs=n_envs)
     genv.reset(seed=0)
     out["gym_vector"] = _vec_rate(genv, n_envs, ticks, genv.step)
@@ -310,10 +323,12 @@ def report(res) -> str:
     L += [f"| {r['scene']} | {r['steps_per_s']:,.0f} | {r['pendulum']:,.0f} | {r['ratio']:.2f} |"
           for r in res["env"]]
     L += ["", "## Kernel throughput (64 envs, serial kernel, random actions)", "",
-          f"Machine limit estimate: the nominal core clock ({core_hz() / 1e9:.2f} GHz) over the "
+          f"Machine limit estimate: the core clock /proc/cpuinfo reports ({core_hz() / 1e9:.2f} "
+          "GHz; a boost clock would raise the limit and lower every fraction below) over the "
           "cycles of the minimal update of one cell inside the contact, the larger of its "
           f"floating-point operations / {FP_PER_CYCLE} per cycle (scalar: two add and two mul "
-          f"pipes) and its stores / {STORES_PER_CYCLE} per cycle: "
+          f"pipes) and its stores / {STORES_PER_CYCLE} per cycle (latency of the running sums "
+          "ignored): "
           f"{OPS_PER_CELL['finite_mu']} operations and {STORES_PER_CELL['finite_mu']} stores "
           f"with friction = {_limit(True) / 1e6:.0f} M/s, {OPS_PER_CELL['infinite_mu']} "
           f"operations and {STORES_PER_CELL['infinite_mu']} stores without = "
@@ -324,8 +339,9 @@ def report(res) -> str:
           f"{r['env_steps_per_s']:,.0f} |" for r in res["kernel"]]
     asy = res.get("asymptotic")
     if asy:
-        L += ["", "The same kernel on a large contact (256 cells, 32 sub-steps per tick, rolling at "
-              "constant creep, `Drive.run` with the energy ledger), where the per-tick work and "
+        L += ["", "The physics kernel through `Drive.run` (energy ledger on: a little more work "
+              "than the env's) on a large contact (256 cells, 32 sub-steps per tick, rolling at "
+              "constant creep), where the per-tick work and "
               "the few walked edge cells no longer count: "
               f"{asy['finite_mu']['cell_updates_per_s'] / 1e6:.0f} M/s with friction "
               f"({asy['finite_mu']['fraction']:.2f} of the limit), "
@@ -348,8 +364,10 @@ def report(res) -> str:
           f"| single env (gym.make) | {b['single']:,.0f} | 1.0x |",
           f"| batched core, serial kernel | {b['serial']:,.0f} | "
           f"{b['serial'] / b['single']:.1f}x |",
-          f"| batched core, threaded kernel (prange, 2 cores) | {b['threaded']:,.0f} | "
-          f"{b['threaded'] / b['single']:.1f}x |",
+          f"| batched core, threaded kernel (prange) on 1 thread | {b['threaded_1']:,.0f} | "
+          f"{b['threaded_1'] / b['single']:.1f}x |",
+          f"| batched core, threaded kernel (prange, {b['threads']} threads) | "
+          f"{b['threaded']:,.0f} | {b['threaded'] / b['single']:.1f}x |",
           f"| `gym.make_vec(\"RollingDrive-v0\", num_envs={n})` | {b['gym_vector']:,.0f} | "
           f"{b['gym_vector'] / b['single']:.1f}x |",
           f"| SB3 `RollingDriveVecEnv({n})` | {b['sb3_vecenv']:,.0f} | "
@@ -358,7 +376,11 @@ def report(res) -> str:
           "| envs | serial kernel | threaded kernel | threaded / serial |", "|---|---|---|---|"]
     L += [f"| {r['num_envs']} | {r['serial']:,.0f} | {r['threaded']:,.0f} | "
           f"{r['threaded'] / r['serial']:.2f} |" for r in b["sweep"]]
-    L += ["", f"The batched env uses the threaded kernel from {_parallel_min()} envs on."]
+    L += ["", f"The batched env uses the threaded kernel from {_parallel_min()} envs on.  At "
+          f"{n} envs the threads give {b['threaded'] / b['threaded_1']:.2f}x over the same "
+          f"kernel on one thread; the rest of the threaded / serial ratio "
+          f"({b['threaded_1'] / b['serial']:.2f}x) is the prange kernel's different generated "
+          "code."]
     if res.get("sb3"):
         L += ["", "## Training env (SB3, default scene, both in VecMonitor)", "",
               "| envs | RollingDriveVecEnv (batched, used by agents.train) | DummyVecEnv of "

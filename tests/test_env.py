@@ -234,3 +234,13 @@ def test_env_leaves_the_energy_ledger_out_and_says_so():
     env.step(np.array([0.5, 0.5, 0.1], np.float32))
     with pytest.raises(RuntimeError, match="ledger"):
         env.unwrapped.drive.energy
+
+
+@pytest.mark.parametrize("scene", ["default", "heavy_inf_friction"])
+def test_denormal_rolling_action_right_after_reset(scene):
+    """A valid action whose rolling rate is a subnormal number, straight after reset (patch at
+    the cell boundary c = 0), gives a finite step, not an error."""
+    env = gym.make("RollingDrive-v0", scene=scene)
+    env.reset(seed=0)
+    obs, reward, *_ = env.step(np.array([0.5, 1e-310, 0.0]))
+    assert np.all(np.isfinite(obs)) and np.isfinite(reward)

@@ -238,3 +238,28 @@ def test_runner_equation_holds_in_partial_slip(m, load_fraction):
     resid = m * np.diff(out["vstar"]) - dt * (out["T"][1:] + F)
     rel = np.max(np.abs(resid)) / (dt * mu * N1)
     assert rel < 1e-12, f"runner equation residual {rel:.1e} of dt mu N"
+
+
+@pytest.mark.parametrize("mu", [0.2, math.inf])
+def test_massless_runner_without_contact_keeps_zero_creep(mu):
+    """A massless runner with no contact has no force balance to pick its velocity; both solvers
+    take the limit of a vanishing contact, v* = omega R - v (no creep), so x* does not depend on
+    which friction path ran."""
+    a1 = GEO.a1
+    drv = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=0.0), resolution=8,
+                 stroke=(-4 * a1, 4 * a1))
+    drv.reset()
+    u, v = 0.02, [0.0199, 0.0, 0.005]
+    out = drv.run(dt_tick=1e-4, n_sub=4, omega_R=[u] * 3, v=v, d=[a1 * a1 / GEO.R, 0.0, 0.0])
+    assert np.allclose(out["vstar"][1:], [u - v[1], u - v[2]], rtol=1e-12, atol=0), out["vstar"]
+
+
+@pytest.mark.parametrize("mu", [0.2, math.inf])
+def test_tiny_rolling_rate_stays_finite(mu):
+    """|omega R| near the smallest double (1e-310 in kernel units) must not overflow a
+    reciprocal: the step is finite and the contact barely moves."""
+    drv = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=1e-3),
+                 stroke=(-2 * GEO.a1, 2 * GEO.a1))
+    drv.reset()
+    out = drv.run(dt_tick=1e-4, n_sub=4, omega_R=[1e-312, -1e-312], v=[0.0, 0.0], N=[0.5, 0.5])
+    assert np.all(np.isfinite(out["T"])) and np.all(np.isfinite(out["vstar"]))
