@@ -9,7 +9,7 @@ from gymnasium import spaces
 
 from . import _envkernel as EK
 from . import _kernel as K
-from .model import Drive, DriveParams
+from .model import Drive, DriveParams, check_flags
 from .scenes import Scene, load_scene
 
 OBS_NAMES = (
@@ -146,20 +146,13 @@ class RollingDriveEnv(gym.Env):
         return self._obs[0].copy(), self._info()
 
     def step(self, action):
-        a = np.asarray(action)
-        if a.shape != (3,) or a.dtype.kind not in "fiub":
-            check_actions(a, (3,))  # raises with the reason
-        self._act[0] = a
+        a = load_actions(action, (3,), self._act)
         U, A, B, L, st, p = self._arrays
         bad = EK.env_step_serial(self._act, self._sv, self._target, self._steps, U, A, B, L, st,
                                  p, self._out, self._obs, self._extra, *self._features)
-        x = self._extra[0]
         if bad:
-            if bad < 0:
-                check_actions(a, (3,))  # raises with the reason
-                raise ValueError("action must be finite and inside [-1, 1]")
-            self.drive._check_flags()
-            raise FloatingPointError("non-finite state after a physics tick")
+            raise_step_error(bad, a, (3,), st)
+        x = self._extra[0]
         self._history.append(x[EK.X_XS])
         if self.render_mode == "human":
             self.render()
@@ -213,6 +206,27 @@ def sample_target(scene: Scene, rng, options) -> float:
     mag = rng.uniform(scene.target_min, scene.target_max)
     sign = rng.choice((-1.0, 1.0)) if scene.target_both_signs else 1.0
     return float(sign * mag)
+
+
+def load_actions(action, shape, dest) -> np.ndarray:
+    """Copy actions of ``shape`` into the env kernel's float64 buffer ``dest``.  A wrong shape or
+    a non-numeric type raises here (``check_actions`` names it); range and finiteness are
+    checked in the kernel, which reports them through ``raise_step_error``."""
+    a = np.asarray(action)
+    if a.shape != shape or a.dtype.kind not in "fiub":
+        check_actions(a, shape)  # raises with the reason
+    dest[...] = a.reshape(dest.shape)
+    return a
+
+
+def raise_step_error(bad: int, action, shape, st) -> None:
+    """Raise what a nonzero status of the env kernel stands for: -1 a bad action (nothing was
+    stepped), > 0 envs with a kernel error flag or a non-finite reward or velocity."""
+    if bad < 0:
+        check_actions(action, shape)  # raises with the reason
+        raise ValueError("action must be finite and inside [-1, 1]")
+    check_flags(st)
+    raise FloatingPointError("non-finite state after a physics tick")
 
 
 def check_actions(action, shape) -> np.ndarray:

@@ -19,6 +19,16 @@ from .validation import check_range
 _INF = math.inf
 
 
+def check_flags(st) -> None:
+    """Raise for the kernel's error flags in a state vector or a batch of them (rows)."""
+    flags = np.bitwise_or.reduce(np.atleast_2d(st)[:, K.ST_FLAG].astype(np.int64))
+    if flags & K.FLAG_GRID:
+        raise RuntimeError("the contact left the spring row: the rolling stroke exceeded the "
+                           "grid built for it (enlarge `stroke`)")
+    if flags & K.FLAG_NONFINITE:
+        raise FloatingPointError("the kernel produced a non-finite value")
+
+
 @dataclass(frozen=True)
 class DriveParams:
     """Physics of one drive, SI units.
@@ -202,12 +212,7 @@ class Drive:
         return self._to_si(out[:done])
 
     def _check_flags(self):
-        flag = int(self.st[K.ST_FLAG])
-        if flag & K.FLAG_GRID:
-            raise RuntimeError("the contact left the spring row: the rolling stroke exceeded the "
-                               "grid built for it (enlarge `stroke`)")
-        if flag & K.FLAG_NONFINITE:
-            raise FloatingPointError("the kernel produced a non-finite value")
+        check_flags(self.st)
 
     def _to_si(self, out):
         F0, L0, t0 = self.F0, self.L0, self.t0

@@ -24,7 +24,7 @@ from gymnasium.utils import seeding
 
 from . import _envkernel as EK
 from . import _kernel as K
-from .env import OBS_NAMES, build_drive, check_actions, info_dict, sample_target
+from .env import OBS_NAMES, build_drive, info_dict, load_actions, raise_step_error, sample_target
 from .scenes import load_scene
 
 PARALLEL_MIN_ENVS = 4
@@ -80,21 +80,12 @@ class BatchCore:
 
     def step(self, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Advance every env one tick; returns (obs float32, rewards, truncated)."""
-        a = np.asarray(actions)
-        if a.shape != (self.num_envs, 3) or a.dtype.kind not in "fiub":
-            check_actions(a, (self.num_envs, 3))  # raises with the reason
-        self.act[:] = a
+        a = load_actions(actions, (self.num_envs, 3), self.act)
         bad = self._step_fn(self.act, self.sv, self.target, self.steps, self.U, self.A, self.B,
                             self.L, self.st, self.p, self.out, self.obs, self.extra,
                             *self.features)
         if bad:
-            if bad < 0:
-                check_actions(a, (self.num_envs, 3))  # raises with the reason
-                raise ValueError("action must be finite and inside [-1, 1]")
-            flags = self.st[:, K.ST_FLAG].astype(np.int64)
-            if np.any(flags & (K.FLAG_GRID | K.FLAG_NONFINITE)):
-                raise FloatingPointError(f"kernel error flags {np.unique(flags)}")
-            raise FloatingPointError("non-finite state after a physics tick")
+            raise_step_error(bad, a, (self.num_envs, 3), self.st)
         return self.obs.copy(), self.extra[:, EK.X_REWARD].copy(), \
             self.steps >= self.max_episode_steps
 

@@ -102,3 +102,26 @@ def test_sb3_trains_on_batched_env():
     model = PPO("MlpPolicy", venv, n_steps=32, batch_size=64, n_epochs=1, seed=0, device="cpu")
     model.learn(512)
     assert model.num_timesteps >= 512
+
+
+@pytest.mark.parametrize("num_envs", [1, 6])
+def test_kernel_errors_raise_in_single_and_batched_env(num_envs):
+    """A kernel error flag in any env of the batch raises the same error as in the single env:
+    the contact off the spring row -> RuntimeError, a non-finite state -> FloatingPointError."""
+    from rolling_env import _kernel as K
+
+    core = BatchCore(num_envs, scene="default")
+    core.reset()
+    core.st[-1, K.ST_C] = 1e6  # patch far outside the spring row
+    with pytest.raises(RuntimeError, match="spring row"):
+        core.step(np.zeros((num_envs, 3)))
+    core.reset()
+    core.step(np.tile([0.5, 0.5, 0.1], (num_envs, 1)))
+    core.U[-1, :] = np.nan  # a corrupted deflection in the last env
+    with pytest.raises(FloatingPointError):
+        core.step(np.tile([0.5, 0.5, 0.1], (num_envs, 1)))
+    env = gym.make("RollingDrive-v0")
+    env.reset(seed=0)
+    env.unwrapped.drive.st[K.ST_C] = 1e6
+    with pytest.raises(RuntimeError, match="spring row"):
+        env.step(np.zeros(3, np.float32))
