@@ -87,7 +87,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except ValueError as e:  # validation errors from the library: one line, exit 2
+    except (ValueError, OSError) as e:  # validation errors from the library, or an output
+        # path that cannot be written (--out names a file, no permission): one line, exit 2
         print(f"rolling-drive {args.command}: error: {e}", file=sys.stderr)
         return 2
 

@@ -127,8 +127,23 @@ def force_sum(delta, eps, w, vstar_ratio, *, resolution=DEFAULT_RESOLUTION, peri
     return (T1 + T2) / (2 * geo.G_star * wave.a1 ** 2)
 
 
+OMEGA_N_RATIO_RANGE = (1e-100, 1e100)  # finite nonzero r: m stays a finite positive double
+
+
+def check_omega_n_ratio(r) -> float:
+    """omega_n / Omega: 0 (infinitely heavy runner), inf (massless) or a finite value inside
+    ``OMEGA_N_RATIO_RANGE``; anything else raises ValueError naming the range."""
+    r = check_range("omega_n_ratio", r, 0.0, math.inf, allow_inf=True)
+    lo, hi = OMEGA_N_RATIO_RANGE
+    if r != 0.0 and math.isfinite(r) and not lo <= r <= hi:
+        raise ValueError(f"omega_n_ratio must be 0 (infinitely heavy runner), inf (massless) "
+                         f"or in [{lo:g}, {hi:g}], got {r!r}")
+    return r
+
+
 def natural_frequency_mass(r: float, wave: SquareWave, G_star: float) -> float:
     """Runner mass m [kg] for omega_n / Omega = r with omega_n = sqrt(2 a1 G*/m), Omega = 2 pi/tau."""
+    r = check_omega_n_ratio(r)
     if r == 0:
         return math.inf
     if math.isinf(r):
@@ -153,7 +168,7 @@ def simulate(delta, eps, w, omega_n_ratio, *, mu=math.inf, periods=40,
     ``energy_residual`` (residual / drive work: positive = dissipated by the numerics),
     ``seconds``; with ``record`` also the per-tick trajectory."""
     _check_common(delta, eps, w, resolution)
-    check_range("omega_n_ratio", omega_n_ratio, 0.0, math.inf, allow_inf=True)
+    check_omega_n_ratio(omega_n_ratio)
     check_range("mu", mu, 0.0, math.inf, lo_open=True, allow_inf=True)
     check_range("vstar0_ratio", vstar0_ratio, -1e3, 1e3)
     if int(periods) != periods or periods < 2:
@@ -223,12 +238,15 @@ def default_substeps(omega_n_ratio, wave: SquareWave, resolution, ticks_per_half
     return int(math.ceil(n))
 
 
+MINDLIN_MU_MAX = 1e3  # beyond it the slip distance u* = 3 mu N / (16 G* a1) leaves any contact
+
+
 def mindlin(mu, *, points=21, resolution=DEFAULT_RESOLUTION, geo: Geometry = Geometry(),
             n_sub=20):
     """Cattaneo-Mindlin: press with d1, then displace tangentially up to 1.2 u* (runner held).
 
     Returns ``u_over_ustar``, ``T_over_muN`` (simulated) and ``analytic`` lists."""
-    check_range("mu", mu, 0.0, math.inf, lo_open=True, hi_open=True)
+    check_range("mu", mu, 0.0, MINDLIN_MU_MAX, lo_open=True)
     if int(points) != points or points < 2:
         raise ValueError(f"points must be an integer >= 2, got {points}")
     check_range("resolution", resolution, 2.0, 1e5)

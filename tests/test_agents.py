@@ -138,6 +138,19 @@ def test_atomic_write_never_leaves_partial_file(tmp_path):
     assert target.read_text() == "new"
 
 
+def test_atomic_write_gives_the_mode_of_a_plain_open(tmp_path):
+    """Results are readable like any file the user writes (umask applied), not owner-only."""
+    old = os.umask(0o022)
+    try:
+        plain = tmp_path / "plain.txt"
+        plain.write_text("x")
+        atomic_write(tmp_path / "atomic.txt", lambda p: Path(p).write_text("x"))
+    finally:
+        os.umask(old)
+    mode = (tmp_path / "atomic.txt").stat().st_mode & 0o777
+    assert mode == plain.stat().st_mode & 0o777 == 0o644, oct(mode)
+
+
 def _train(tmp_path, *extra, timesteps=512, scene="default", n_envs=2):
     cmd = [sys.executable, "-m", "agents.train", "--algo", "ppo", "--scene", scene,
            "--seed", "3", "--n-timesteps", str(timesteps), "--n-envs", str(n_envs),

@@ -44,6 +44,7 @@ def test_mindlin_json(capsys):
     (["simulate", "--delta", "0.7", "--eps", "0.1", "--w", "2.5", "--omega-n-ratio", "1",
       "--mu", "-1"], "mu"),
     (["mindlin", "--mu", "0.3", "--points", "1"], "points"),
+    (["mindlin", "--mu", "1e300"], "mu"),
 ])
 def test_bad_arguments_exit_2_naming_the_parameter(argv, name, capsys):
     with pytest.raises(SystemExit) as e:
@@ -57,3 +58,32 @@ def test_console_script_help():
     out = subprocess.run([sys.executable, "-m", "rolling_env", "simulate", "--help"],
                          capture_output=True, text=True)
     assert out.returncode == 0 and "--omega-n-ratio" in out.stdout
+
+
+@pytest.mark.parametrize("delta,eps", [(1.0, 0.1), (0.5, 1.0)])
+def test_working_point_where_eq32_vanishes(delta, eps, capsys):
+    """delta = 1 or eps = 1 are valid inputs where Eq. 32 is 0: no relative error, no crash."""
+    r = _json(capsys, "working-point", "--delta", str(delta), "--eps", str(eps), "--w", "2.5",
+              "--json")
+    assert r["rel_error"] is None and abs(r["eq32"]) < 1e-15
+    assert abs(r["simulated"]) < 1e-9, f"no net drive expected, got {r['simulated']}"
+    assert main(["working-point", "--delta", str(delta), "--eps", str(eps), "--w", "2.5"]) == 0
+    assert "n/a" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv,name", [
+    (["simulate", "--delta", "0.7", "--eps", "0.1", "--w", "2.5", "--omega-n-ratio", "1e-170"],
+     "omega_n_ratio"),
+    (["simulate", "--delta", "0.7", "--eps", "0.1", "--w", "2.5", "--omega-n-ratio", "1e170"],
+     "omega_n_ratio"),
+    (["rollout", "--controller", "zero", "--out", "{file}"], "File exists"),
+])
+def test_library_errors_exit_2_in_one_line(argv, name, tmp_path, capsys):
+    """Range errors raised by the library and unwritable outputs: one line naming the cause."""
+    f = tmp_path / "a_file"
+    f.write_text("keep")
+    argv = [a.replace("{file}", str(f)) for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert name in err and len(err.strip().splitlines()) == 1, err
+    assert f.read_text() == "keep"

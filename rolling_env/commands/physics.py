@@ -25,7 +25,9 @@ def register(sub):
                        "mass, inf: massless).")
     _dimensionless(p)
     p.add_argument("--omega-n-ratio", type=finite_float("omega-n-ratio", 0, math.inf,
-                   allow_inf=True), required=True, help="r = omega_n / Omega (0 .. inf)")
+                   allow_inf=True), required=True,
+                   help="r = omega_n / Omega: 0 (infinitely heavy), inf (massless) or in "
+                   f"[{ex.OMEGA_N_RATIO_RANGE[0]:g}, {ex.OMEGA_N_RATIO_RANGE[1]:g}]")
     p.add_argument("--mu", type=finite_float("mu", 0, math.inf, lo_open=True, allow_inf=True),
                    default=math.inf, help="friction coefficient (default inf: no slip)")
     p.add_argument("--a-over-r", type=finite_float("a-over-r", 0, 0.5, lo_open=True),
@@ -43,7 +45,7 @@ def register(sub):
     p = sub.add_parser("mindlin", help="Cattaneo-Mindlin tangential loading vs the analytic law",
                        description="Press the sphere, then displace it tangentially with the "
                        "runner held and no rolling; compare T/(mu N) with the Cattaneo-Mindlin law.")
-    p.add_argument("--mu", type=finite_float("mu", 0, math.inf, lo_open=True, hi_open=True),
+    p.add_argument("--mu", type=finite_float("mu", 0, ex.MINDLIN_MU_MAX, lo_open=True),
                    required=True)
     p.add_argument("--points", type=positive_int("points", 2, 100000), default=21)
     p.add_argument("--resolution", type=finite_float("resolution", 2, 1e5),
@@ -68,8 +70,9 @@ def _working_point(args):
         human = (f"v*/(omega R) simulated {r['simulated']:.6f}  (w < 2: Eq. 32 does not apply; "
                  f"corrected formula {r.get('working_point_ratio')})  [{r['seconds']:.3f} s]")
     else:
+        rel = "n/a (Eq. 32 is 0)" if r["rel_error"] is None else f"{r['rel_error']:.2e}"
         human = (f"v*/(omega R) simulated {r['simulated']:.6f}  Eq. 32 {r['eq32']:.6f}  "
-                 f"Eq. 29 {r['eq29']:.6f}  rel. error {r['rel_error']:.2e}  [{r['seconds']:.3f} s]")
+                 f"Eq. 29 {r['eq29']:.6f}  rel. error {rel}  [{r['seconds']:.3f} s]")
     emit(r, args.json, human)
     return 0
 

@@ -39,8 +39,11 @@ def _run(args):
            "slip_work": data["total_slip_work"], "steps": int(data["step"][-1])}
     if args.frame:
         import matplotlib.image
+
+        from ..io import atomic_write
         frame_path = out / f"{stem}_frame.png"
-        matplotlib.image.imsave(frame_path, env.render())
+        frame = env.render()
+        atomic_write(frame_path, lambda p: matplotlib.image.imsave(p, frame, format="png"))
         res["frame"] = str(frame_path)
     env.close()
     emit(res, args.json, "\n".join(f"{k}: {v}" for k, v in res.items()))
