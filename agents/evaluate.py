@@ -21,6 +21,7 @@ import numpy as np
 
 import rolling_env
 from rolling_env.rollout import rollout
+from rolling_env.scenes import load_scene
 
 from .baselines import Eq32Feedback, Eq32OpenLoop
 from .common import atomic_write
@@ -289,6 +290,11 @@ def main(argv=None):
     args = p.parse_args(argv)
     if args.episodes < 1:
         p.error(f"--episodes must be >= 1, got {args.episodes}")
+    for scene in args.scenes:  # every scene checked before anything is written
+        try:
+            load_scene(scene)
+        except ValueError as e:
+            p.error(f"--scenes: {e}")
     out, runs = Path(args.out), Path(args.runs)
     rows = []
     for scene in args.scenes:

@@ -22,7 +22,11 @@ from pathlib import Path
 
 import yaml
 
+from rolling_env.cli import positive_int
+
 from .common import ALGOS, atomic_write, load_hyperparams, make_vec_env, parse_kwargs, save_model
+
+SEED_MAX = 2**31 - 1 - 10_000  # the evaluation env is seeded seed + 10000
 
 _ALGO_KEYS = {
     "ppo": ("n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda", "learning_rate",
@@ -38,14 +42,18 @@ def build_parser():
     p = argparse.ArgumentParser(prog="python -m agents.train", description=__doc__.splitlines()[0])
     p.add_argument("--algo", choices=ALGOS, required=True)
     p.add_argument("--scene", default="default", help="scene name or YAML path")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--n-timesteps", type=int, default=None, help="override the YAML budget")
-    p.add_argument("--n-envs", type=int, default=None, help="override the YAML n_envs")
+    p.add_argument("--seed", type=positive_int("seed", 0, SEED_MAX), default=0)
+    p.add_argument("--n-timesteps", type=positive_int("n-timesteps", 1, 10**12), default=None,
+                   help="override the YAML budget")
+    p.add_argument("--n-envs", type=positive_int("n-envs", 1, 4096), default=None,
+                   help="override the YAML n_envs")
     p.add_argument("--conf", default=None, help="hyper-parameter YAML (default configs/...)")
     p.add_argument("--run-dir", default=None, help="run folder (default runs/<scene>/<algo>_seed<seed>)")
-    p.add_argument("--eval-freq", type=int, default=10000, help="env steps between evaluations")
-    p.add_argument("--eval-episodes", type=int, default=5)
-    p.add_argument("--checkpoint-freq", type=int, default=50000, help="env steps between checkpoints")
+    p.add_argument("--eval-freq", type=positive_int("eval-freq", 1, 10**12), default=10000,
+                   help="env steps between evaluations")
+    p.add_argument("--eval-episodes", type=positive_int("eval-episodes", 1, 10**6), default=5)
+    p.add_argument("--checkpoint-freq", type=positive_int("checkpoint-freq", 1, 10**12),
+                   default=50000, help="env steps between checkpoints")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
 
@@ -108,12 +116,20 @@ def train(args) -> Path:
     import rolling_env
 
     torch.set_num_threads(1)
-    hp = load_hyperparams(args.algo, Path(args.scene).stem if args.scene.endswith(".yaml")
-                          else args.scene, args.conf)
-    n_envs = int(args.n_envs or hp.get("n_envs", 1))
-    n_timesteps = int(args.n_timesteps or float(hp["n_timesteps"]))
-    env_kwargs = dict(hp.get("env_kwargs") or {})
     scene = args.scene
+    hp = load_hyperparams(args.algo, scene_key(scene), args.conf)
+    n_envs = int(args.n_envs if args.n_envs is not None else hp.get("n_envs", 1))
+    n_timesteps = int(args.n_timesteps if args.n_timesteps is not None
+                      else float(hp["n_timesteps"]))
+    env_kwargs = dict(hp.get("env_kwargs") or {})
+    if n_envs < 1 or n_timesteps < 1:
+        raise ValueError(f"n_envs and n_timesteps must be >= 1 (from {args.conf or 'the YAML'}),"
+                         f" got {n_envs} and {n_timesteps}")
+    # the envs are built (and the scene checked) before the run folder: a bad scene leaves
+    # nothing behind
+    set_random_seed(args.seed)
+    env = make_vec_env(scene, n_envs, args.seed, env_kwargs)
+    eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs)
     run = Path(args.run_dir or f"runs/{Path(scene).stem}/{args.algo}_seed{args.seed}")
     run.mkdir(parents=True, exist_ok=True)
     cfg = dict(hp, n_envs=n_envs, n_timesteps=n_timesteps, algo=args.algo, scene=scene,
@@ -121,9 +137,6 @@ def train(args) -> Path:
     atomic_write(run / "config.yml", lambda p: Path(p).write_text(yaml.safe_dump(cfg)))
     atomic_write(run / "command.txt", lambda p: Path(p).write_text(" ".join(sys.argv) + "\n"))
 
-    set_random_seed(args.seed)
-    env = make_vec_env(scene, n_envs, args.seed, env_kwargs)
-    eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs)
     norm = parse_kwargs(hp.get("normalize", False))
     if norm is not None:
         env = VecNormalize(env, gamma=float(hp.get("gamma", 0.99)), **norm)
@@ -169,9 +182,19 @@ def train(args) -> Path:
     return run
 
 
+def scene_key(scene: str) -> str:
+    """Key of a scene in the hyper-parameter YAML: its name, or the stem of a scene file."""
+    p = Path(scene)
+    return p.stem if p.suffix in (".yaml", ".yml") else scene
+
+
 def main(argv=None):
     args = build_parser().parse_args(argv)
-    train(args)
+    try:
+        train(args)
+    except ValueError as e:  # a bad scene or hyper-parameter: one line, exit 2, no run folder
+        print(f"python -m agents.train: error: {e}", file=sys.stderr)
+        return 2
     return 0
 
 

@@ -226,3 +226,43 @@ def test_ppo_learns_to_move_the_runner(tmp_path):
            for i, t in enumerate(targets)]
     # the median: one short run may still send a single target astray (seen: 1 of 5)
     assert np.median(rel) < 0.5, f"PPO final |error| / |target|: {np.round(rel, 3)}"
+
+
+@pytest.mark.parametrize("extra,name", [
+    (["--n-timesteps", "0"], "n-timesteps"),
+    (["--n-timesteps", "-5"], "n-timesteps"),
+    (["--n-envs", "0"], "n-envs"),
+    (["--eval-freq", "-1"], "eval-freq"),
+    (["--seed", "-3"], "seed"),
+])
+def test_train_rejects_bad_arguments(extra, name, tmp_path, capsys):
+    """No silent fallback to the YAML budget, no clamping: exit 2 naming the argument."""
+    from agents.train import main as train_main
+    with pytest.raises(SystemExit) as e:
+        train_main(["--algo", "ppo", "--run-dir", str(tmp_path / "run"), *extra])
+    assert e.value.code == 2
+    assert name in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
+def test_train_bad_scene_leaves_no_run_folder(tmp_path, capsys):
+    from agents.train import main as train_main
+    assert train_main(["--algo", "ppo", "--scene", "bogus", "--run-dir",
+                       str(tmp_path / "run")]) == 2
+    assert "unknown scene 'bogus'" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists(), "config.yml written before the scene was checked"
+
+
+def test_evaluate_checks_every_scene_before_writing(tmp_path, capsys):
+    from agents.evaluate import main as evaluate_main
+    with pytest.raises(SystemExit) as e:
+        evaluate_main(["--scenes", "heavy_inf_friction", "bogus", "--runs", str(tmp_path),
+                       "--episodes", "1", "--out", str(tmp_path / "out")])
+    assert e.value.code == 2 and "bogus" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_train_scene_key_accepts_both_yaml_suffixes():
+    from agents.train import scene_key
+    assert scene_key("configs/scenes/resonant.yml") == scene_key("x/resonant.yaml") == "resonant"
+    assert scene_key("default") == "default"
