@@ -62,15 +62,30 @@ class BatchCore:
         self._step_fn = EK.env_step_parallel if n >= PARALLEL_MIN_ENVS else EK.env_step_serial
 
     def seed(self, seed=None):
-        """Env i gets seed + i (Gymnasium's convention); None draws fresh entropy."""
+        """Env i gets seed + i (Gymnasium's convention); None draws fresh entropy.  A sequence
+        of num_envs seeds (int or None each) seeds env i with seed[i] (None: left as is)."""
+        if isinstance(seed, (list, tuple, np.ndarray)):
+            if len(seed) != self.num_envs:
+                raise ValueError(f"seed must be an int, None or a sequence of num_envs = "
+                                 f"{self.num_envs} seeds, got {len(seed)} seeds")
+            for i, s in enumerate(seed):
+                if s is not None:
+                    self.rngs[i] = seeding.np_random(int(s))[0]
+            return
         for i in range(self.num_envs):
             self.rngs[i] = seeding.np_random(None if seed is None else seed + i)[0]
 
     def reset(self, mask=None, options=None) -> None:
-        """Reset the envs where ``mask`` is True (all when None)."""
+        """Reset the envs where ``mask`` is True (all when None).  ``options``: one dict for
+        every env, or a sequence of num_envs dicts (or None), one per env."""
+        per_env = isinstance(options, (list, tuple))
+        if per_env and len(options) != self.num_envs:
+            raise ValueError(f"options must be a dict or a sequence of num_envs = "
+                             f"{self.num_envs} dicts, got {len(options)}")
         idx = range(self.num_envs) if mask is None else np.flatnonzero(mask)
         for i in idx:
-            self.target[i] = sample_target(self.scene, self.rngs[i], options)
+            self.target[i] = sample_target(self.scene, self.rngs[i],
+                                           options[i] if per_env else options)
             self.U[i] = 0.0
             self.st[i] = 0.0
             self.steps[i] = 0
@@ -129,8 +144,9 @@ class RollingDriveVectorEnv(_gym_vector_base()):
 
     def reset(self, *, seed=None, options=None):
         if seed is not None:
-            self.core.seed(seed)
-            self.action_space.seed(seed)
+            self.core.seed(seed)  # int: env i gets seed + i; or one seed (or None) per env
+            if isinstance(seed, (int, np.integer)):
+                self.action_space.seed(int(seed))
         self.core.reset(None, options)
         self._autoreset[:] = False
         return self.core.obs.copy(), self._infos(np.ones(self.num_envs, bool))
@@ -179,11 +195,8 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
         self._actions = None
 
     def reset(self):
-        for i, s in enumerate(self._seeds):
-            if s is not None:
-                self.core.rngs[i] = seeding.np_random(s)[0]
-        opts = self._options[0] if self._options and self._options[0] else None
-        self.core.reset(None, opts)
+        self.core.seed(list(self._seeds))
+        self.core.reset(None, [o or None for o in self._options])
         self._reset_seeds()
         self._reset_options()
         self.reset_infos = [self.core.info(i) for i in range(self.num_envs)]
@@ -209,22 +222,52 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
     def close(self):
         pass
 
+    # Attributes and methods live on the batch (``BatchCore``).  A per-env array (leading axis
+    # num_envs, e.g. ``target``, ``steps``) is read and written per index; anything else is
+    # shared by the batch: read for every index, written only for all envs at once.
+    def _per_env(self, attr_name) -> bool:
+        value = getattr(self.core, attr_name)
+        return isinstance(value, np.ndarray) and value.shape[:1] == (self.num_envs,)
+
     def get_attr(self, attr_name, indices=None):
+        idx = list(self._get_indices(indices))
         if attr_name == "render_mode":
-            return [None for _ in self._get_indices(indices)]
-        target = self.core if hasattr(self.core, attr_name) else None
-        if target is None:
+            return [None for _ in idx]
+        if not hasattr(self.core, attr_name):
             raise AttributeError(f"RollingDriveVecEnv has no attribute {attr_name!r}")
-        return [getattr(target, attr_name) for _ in self._get_indices(indices)]
+        value = getattr(self.core, attr_name)
+        if self._per_env(attr_name):
+            return [value[i] for i in idx]
+        return [value for _ in idx]
 
     def set_attr(self, attr_name, value, indices=None):
         if not hasattr(self.core, attr_name):
             raise AttributeError(f"RollingDriveVecEnv has no attribute {attr_name!r}")
-        setattr(self.core, attr_name, value)
+        idx = list(self._get_indices(indices))
+        if self._per_env(attr_name):
+            getattr(self.core, attr_name)[idx] = value
+        elif sorted(idx) == list(range(self.num_envs)):
+            setattr(self.core, attr_name, value)
+        else:
+            raise NotImplementedError(f"{attr_name!r} is shared by every env of the batch; "
+                                      "set it for all envs (indices=None)")
 
     def env_method(self, method_name, *method_args, indices=None, **method_kwargs):
+        """Call a ``BatchCore`` method once for the batch.  A method with a ``mask`` argument
+        (``reset``) gets the mask of ``indices``; others need every env (indices=None)."""
+        import inspect
         fn = getattr(self.core, method_name)
-        return [fn(*method_args, **method_kwargs) for _ in self._get_indices(indices)]
+        idx = list(self._get_indices(indices))
+        if "mask" in inspect.signature(fn).parameters:
+            mask = np.zeros(self.num_envs, dtype=bool)
+            mask[idx] = True
+            result = fn(*method_args, mask=mask, **method_kwargs)
+        elif sorted(idx) == list(range(self.num_envs)):
+            result = fn(*method_args, **method_kwargs)
+        else:
+            raise NotImplementedError(f"BatchCore.{method_name} acts on the whole batch; call "
+                                      "it for all envs (indices=None)")
+        return [result for _ in idx]
 
     def env_is_wrapped(self, wrapper_class, indices=None):
         return [False for _ in self._get_indices(indices)]

@@ -125,3 +125,37 @@ def test_kernel_errors_raise_in_single_and_batched_env(num_envs):
     env.unwrapped.drive.st[K.ST_C] = 1e6
     with pytest.raises(RuntimeError, match="spring row"):
         env.step(np.zeros(3, np.float32))
+
+
+def test_sb3_vecenv_per_env_options_and_indices():
+    """set_options with one dict per env, get_attr/set_attr/env_method honour indices."""
+    v = RollingDriveVecEnv(3)
+    v.set_options([{"target": 1e-7}, {"target": 2e-7}, {}])
+    v.seed(5)
+    v.reset()
+    assert v.core.target[0] == 1e-7 and v.core.target[1] == 2e-7, v.core.target
+    assert v.core.target[2] not in (1e-7, 2e-7)
+    assert v.get_attr("target", indices=[1]) == [2e-7]
+    assert v.get_attr("num_envs") == [3, 3, 3]
+    before = v.core.target.copy()
+    v.core.steps[:] = 7
+    v.env_method("reset", indices=[0])
+    assert v.core.steps.tolist() == [0, 7, 7], "reset with indices must reset only those envs"
+    assert v.core.target[1:].tolist() == before[1:].tolist()
+    v.set_attr("target", 3e-7, indices=[2])
+    assert v.core.target[2] == 3e-7 and v.core.target[1] == 2e-7
+    with pytest.raises(NotImplementedError, match="shared by every env"):
+        v.set_attr("sv", 0.0, indices=[1])
+    with pytest.raises(NotImplementedError, match="whole batch"):
+        v.env_method("seed", 1, indices=[1])
+
+
+def test_gymnasium_vector_env_accepts_a_list_of_seeds():
+    """reset(seed=[s0, s1, ...]) seeds env i with s_i, like Gymnasium's own vector envs."""
+    venv = gym.make_vec("RollingDrive-v0", num_envs=3, vectorization_mode="vector_entry_point")
+    obs_list, _ = venv.reset(seed=[4, 9, 2])
+    for i, s in enumerate([4, 9, 2]):
+        single, _ = gym.make("RollingDrive-v0").reset(seed=s)
+        np.testing.assert_array_equal(obs_list[i], single, err_msg=f"env {i} seeded {s}")
+    with pytest.raises(ValueError, match="num_envs = 3"):
+        venv.reset(seed=[1, 2])
