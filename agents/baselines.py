@@ -25,7 +25,8 @@ error alone has to be slower than t_r, 0.7-1.5 ms for the 20 g runner, or it ove
 Both have SB3's ``predict(obs, state=None, episode_start=None, deterministic=True)`` and work on
 one observation (13,) or a batch (n, 13) (a single env or a VecEnv: ``from_env`` takes
 either); they read the error from obs[0] * target_max and keep their own tick counter per env
-(reset on ``episode_start``).  The action is built by ``rolling_env.actions.from_controls``,
+(reset on ``episode_start``, or on an observation with time_fraction 0, which only a
+reset gives).  The action is built by ``rolling_env.actions.from_controls``,
 the inverse of the env's action mapping ``to_controls`` (one module for both; the compiled
 env tick is tested to map actions exactly as ``to_controls``, tests/test_env.py).
 """
@@ -38,6 +39,7 @@ import numpy as np
 
 from rolling_env import analytic
 from rolling_env.actions import from_controls
+from rolling_env.env import OBS_NAMES
 from rolling_env.scenes import Scene
 
 
@@ -60,13 +62,32 @@ class Eq32Design:
     def half_ticks(self) -> int:
         return max(1, self.scene.ticks_per_period // 2)
 
+    def __post_init__(self):
+        sc = self.scene
+        w_rate, w_stroke = self._w_limits()
+        if min(w_rate, w_stroke) < 2.0:
+            need_rate = 2.0 * self.a1 / (self.half_ticks * sc.dt)
+            need_stroke = 2.0 * self.a1 / 2 / 0.98
+            raise ValueError(
+                f"scene {sc.name!r}: Eq. 32 needs a rolling amplitude w = W/a1 >= 2 per half "
+                f"period, but omega_R_max = {sc.omega_R_max:g} m/s allows w = {w_rate:.3g} "
+                f"and the strokes allow w = {w_stroke:.3g}; the Eq. 32 baselines need "
+                f"omega_R_max >= {need_rate:.3g} m/s and stroke_roll, stroke_translate >= "
+                f"{need_stroke:.3g} m")
+
+    def _w_limits(self) -> tuple[float, float]:
+        """Largest w the rolling rate allows in a half period, and the largest the strokes
+        allow (2 % margin)."""
+        sc = self.scene
+        w_rate = sc.omega_R_max * self.half_ticks * sc.dt / self.a1
+        w_stroke = 2 * min(sc.stroke_roll, sc.stroke_translate) / self.a1 * 0.98
+        return w_rate, w_stroke
+
     @property
     def w(self) -> float:
-        sc = self.scene
-        t_half = self.half_ticks * sc.dt
-        w_rate = sc.omega_R_max * t_half / self.a1           # fastest rolling
-        w_stroke = 2 * min(sc.stroke_roll, sc.stroke_translate) / self.a1 * 0.98
-        return max(2.0, min(self.w_pref, w_rate, w_stroke))
+        """w_pref, lowered to what the rate and the strokes allow (never below 2: checked at
+        construction)."""
+        return min(self.w_pref, *self._w_limits())
 
     @property
     def omega_R(self) -> float:
@@ -157,6 +178,9 @@ def scene_of(env) -> Scene:
                     "or Scene")
 
 
+TIME_FRACTION = OBS_NAMES.index("time_fraction")
+
+
 class _Eq32Base:
     def __init__(self, scene: Scene, **design_kw):
         self.design = Eq32Design(scene, **design_kw)
@@ -180,6 +204,9 @@ class _Eq32Base:
         starts = (np.ones(n, bool) if episode_start is None and self._fresh
                   else np.asarray(episode_start if episode_start is not None else np.zeros(n),
                                   bool).reshape(n))
+        # a reset observation also says so itself (time_fraction is 0 only there), so a plain
+        # Gymnasium loop without episode_start restarts the plan too
+        starts = starts | (ob[:, TIME_FRACTION] == 0.0)
         self._fresh = False
         acts = np.empty((n, 3), np.float32)
         for i in range(n):

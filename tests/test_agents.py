@@ -266,3 +266,35 @@ def test_train_scene_key_accepts_both_yaml_suffixes():
     from agents.train import scene_key
     assert scene_key("configs/scenes/resonant.yml") == scene_key("x/resonant.yaml") == "resonant"
     assert scene_key("default") == "default"
+
+
+@pytest.mark.parametrize("cls", [Eq32OpenLoop, Eq32Feedback])
+def test_baseline_restarts_on_a_reset_observation_without_episode_start(cls):
+    """A plain Gymnasium loop that never passes episode_start: the second episode must be
+    driven like the first (the reset observation's time_fraction = 0 restarts the plan)."""
+    env = rolling_env.make("heavy_inf_friction")
+    tol = env.unwrapped.scene.tolerance
+    reused = cls.from_env(env)
+    finals = {}
+    for ep in (0, 1):
+        for name, ctrl in (("reused", reused), ("fresh", cls.from_env(env))):
+            obs, _ = env.reset(seed=ep)
+            done = False
+            while not done:
+                obs, _, te, tr, info = env.step(ctrl.predict(obs)[0])
+                done = te or tr
+            finals[name, ep] = abs(info["target"] - info["xstar"])
+    for ep in (0, 1):
+        assert finals["reused", ep] == pytest.approx(finals["fresh", ep], abs=1e-3 * tol), (
+            f"episode {ep}: reused controller ends {finals['reused', ep] / tol:.2f} tol off, "
+            f"fresh one {finals['fresh', ep] / tol:.2f}")
+
+
+def test_baseline_rejects_a_scene_too_slow_for_eq32():
+    """w = W/a1 >= 2 is impossible with a small rolling-rate limit: a clear error at
+    construction naming the limit, not a failure mid-episode."""
+    env = rolling_env.make("default", omega_R_max=0.1)
+    with pytest.raises(ValueError, match=r"omega_R_max = 0.1 m/s allows w = 0.134"):
+        Eq32Feedback.from_env(env)
+    with pytest.raises(ValueError, match="stroke_roll"):
+        Eq32OpenLoop.from_env(rolling_env.make("default", stroke_roll=1e-5))
