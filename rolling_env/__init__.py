@@ -8,24 +8,24 @@ import gymnasium as gym
 
 __version__ = "0.1.0"
 
-DEFAULT_EPISODE_STEPS = 512  # the shipped scenes' episode_steps
-
 if "RollingDrive-v0" not in gym.registry:
     gym.register(
         id="RollingDrive-v0",
         entry_point="rolling_env.env:RollingDriveEnv",
         vector_entry_point="rolling_env.vector:make_vector_env",
-        # TimeLimit comes from registration: the env itself never truncates.
-        max_episode_steps=DEFAULT_EPISODE_STEPS,
+        # no TimeLimit here: the env truncates at its scene's episode_steps (a TimeLimit from
+        # gym.make(..., max_episode_steps=n) can only end episodes earlier)
     )
 
 
 def make(scene="default", **kwargs):
-    """``gym.make("RollingDrive-v0", scene=...)`` with the scene's own ``episode_steps``."""
+    """``gym.make("RollingDrive-v0", scene=..., **overrides)`` with the scene loaded (and
+    checked) first."""
     from .scenes import load_scene
     sc = load_scene(scene, **{k: v for k, v in kwargs.items() if k not in _MAKE_KEYS})
     extra = {k: v for k, v in kwargs.items() if k in _MAKE_KEYS}
-    extra.setdefault("max_episode_steps", sc.episode_steps)
+    from .env import check_time_limit
+    check_time_limit(extra.get("max_episode_steps"), sc)
     return gym.make("RollingDrive-v0", scene=sc, **extra)
 
 

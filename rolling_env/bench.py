@@ -126,7 +126,7 @@ def kernel_throughput(ticks=20_000, scenes=None):
     from .vector import BatchCore
     rows = []
     for sc in scenes or rolling_env.list_scenes():
-        core = BatchCore(64, scene=sc, max_episode_steps=10**9)
+        core = BatchCore(64, scene=sc)
         limit = _limit(math.isfinite(core.scene.mu))
         core._step_fn = EK.env_step_serial
         steps, cells = _core_rate(core, max(ticks // 64, 50))
@@ -169,8 +169,8 @@ def specialisation(ticks=300, scenes=None):
     from .vector import BatchCore
     rows = []
     for sc in scenes or rolling_env.list_scenes():
-        spec = BatchCore(64, scene=sc, max_episode_steps=10**9)
-        full = BatchCore(64, scene=sc, max_episode_steps=10**9)
+        spec = BatchCore(64, scene=sc)
+        full = BatchCore(64, scene=sc)
         mu, mass, load, _ = full.features
         full.features = (1e30 if mu is None else mu, mass, 0.0 if load is None else load, True)
         if full.L.shape[1] == 1:
@@ -197,7 +197,7 @@ def batched(n_envs=256, ticks=200, single_rate=None, sizes=(1, 4, 16, 64, 256)):
     for n in sizes:
         row = dict(num_envs=n)
         for name, fn in (("serial", EK.env_step_serial), ("threaded", EK.env_step_parallel)):
-            core = BatchCore(n, max_episode_steps=10**9)
+            core = BatchCore(n)
             core._step_fn = fn
             row[name], _ = _core_rate(core, max(ticks, 20_000 // n))
         sweep.append(row)
@@ -210,7 +210,7 @@ def batched(n_envs=256, ticks=200, single_rate=None, sizes=(1, 4, 16, 64, 256)):
     threads = numba.get_num_threads()
     numba.set_num_threads(1)
     try:
-        core = BatchCore(n_envs, max_episode_steps=10**9)
+        core = BatchCore(n_envs)
         core._step_fn = EK.env_step_parallel
         out["threaded_1"], _ = _core_rate(core, ticks)
     finally:

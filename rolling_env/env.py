@@ -85,10 +85,12 @@ class RollingDriveEnv(gym.Env):
     ``reset(options={"target": x})`` in metres.
 
     ## Episode End
-    No terminal state (``terminated`` is always False).  Episodes are truncated by the
-    ``TimeLimit`` that registration adds (``max_episode_steps``, 512 = the shipped scenes'
-    ``episode_steps``); the env itself never truncates.  ``rolling_env.make(scene)`` uses the
-    scene's ``episode_steps``.
+    No terminal state (``terminated`` is always False).  The env truncates after the scene's
+    ``episode_steps`` ticks (512 in the shipped scenes; ``episode_steps=n`` overrides it), the
+    same count that ``time_fraction`` uses.  ``gym.make(..., max_episode_steps=n)`` adds a
+    ``TimeLimit`` that can end episodes earlier.  One longer than ``episode_steps`` could never
+    be reached: ``rolling_env.make``, ``gym.make_vec`` and the batched envs reject it (set
+    ``episode_steps`` instead); behind ``gym.make`` the wrapper is invisible to the env.
 
     ## Arguments
     ``gym.make("RollingDrive-v0", scene="default", render_mode=None, **overrides)``: ``scene``
@@ -135,6 +137,7 @@ class RollingDriveEnv(gym.Env):
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed=None, options=None):
+        check_time_limit(getattr(self.spec, "max_episode_steps", None), self.scene)
         super().reset(seed=seed)
         self._target[0] = sample_target(self.scene, self.np_random, options)
         self.drive.reset()
@@ -156,7 +159,8 @@ class RollingDriveEnv(gym.Env):
         self._history.append(x[EK.X_XS])
         if self.render_mode == "human":
             self.render()
-        return self._obs[0].copy(), float(x[EK.X_REWARD]), False, False, self._info()
+        truncated = bool(self._steps[0] >= self.scene.episode_steps)
+        return self._obs[0].copy(), float(x[EK.X_REWARD]), False, truncated, self._info()
 
     def render(self):
         if self.render_mode is None:
@@ -190,6 +194,19 @@ def build_drive(scene: Scene) -> tuple[Drive, float]:
     return drive, a_max
 
 
+def check_time_limit(max_episode_steps, scene: Scene) -> int:
+    """Episode length: the scene's ``episode_steps``, or a shorter ``max_episode_steps``; a
+    longer one raises (the env ends episodes at ``episode_steps``)."""
+    n = scene.episode_steps
+    if max_episode_steps is None:
+        return n
+    if int(max_episode_steps) != max_episode_steps or not 1 <= max_episode_steps <= n:
+        raise ValueError(f"max_episode_steps must be an integer in [1, {n}] (the scene's "
+                         f"episode_steps; pass episode_steps={max_episode_steps} to lengthen "
+                         f"episodes), got {max_episode_steps!r}")
+    return int(max_episode_steps)
+
+
 def sample_target(scene: Scene, rng, options) -> float:
     """options['target'] [m] if given (checked), else uniform in [target_min, target_max] with a
     random sign when target_both_signs, drawn from the env's generator ``rng``."""
@@ -213,7 +230,10 @@ def load_actions(action, shape, dest) -> np.ndarray:
     a non-numeric type raises here (``check_actions`` names it); range and finiteness are
     checked in the kernel, which reports them through ``raise_step_error``."""
     a = np.asarray(action)
-    if a.shape != shape or a.dtype.kind not in "fiub":
+    if a.dtype.kind not in "fiu":  # no complex, strings, objects or booleans
+        raise ValueError(f"action must be real numbers in [-1, 1], got dtype {a.dtype}: "
+                         f"{action!r}")
+    if a.shape != shape:
         check_actions(a, shape)  # raises with the reason
     dest[...] = a.reshape(dest.shape)
     return a

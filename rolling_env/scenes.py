@@ -9,9 +9,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import os
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 import yaml
 
@@ -47,7 +50,7 @@ class Scene:
     sub_steps: int           # physics sub-steps per control tick
     resolution: float        # cells per contact radius at N_max
     # task
-    episode_steps: int       # control ticks per episode (registration's max_episode_steps)
+    episode_steps: int       # control ticks per episode (the env truncates there)
     target_min: float        # smallest |target displacement| sampled at reset [m]
     target_max: float        # largest |target displacement| [m]
     target_both_signs: bool  # sample the target's sign too
@@ -104,8 +107,8 @@ def _coerce(key, value):
         if not isinstance(value, bool):
             raise ValueError(f"scene key '{key}' must be true or false, got {value!r}")
         return value
-    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
-        raise ValueError(f"scene key '{key}' must be a number, got {value!r}")
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, str)):
+        raise ValueError(f"scene key '{key}' must be a number, got {value!r}")  # numpy scalars ok
     if isinstance(value, str):
         if value.strip().lower() in ("inf", ".inf", "infinity") and allow_inf:
             value = _INF
@@ -119,6 +122,8 @@ def _coerce(key, value):
         if not math.isfinite(fv) or fv != int(fv):
             raise ValueError(f"scene key '{key}' must be an integer in [{lo}, {hi}], got {value!r}")
         value = int(value)
+        if not lo <= value <= hi:
+            raise ValueError(f"scene key '{key}' must be an integer in [{lo}, {hi}], got {value}")
     x = check_range(f"scene key '{key}'", value, lo, hi, lo_open=lo_open, allow_inf=allow_inf)
     return typ(x) if typ is int else x
 
@@ -140,8 +145,9 @@ def validate(scene: Scene) -> Scene:
                          "runner has no equilibrium once the contact slides)")
     a_max = math.sqrt(s.R * (3 * s.N_max / (4 * s.E_star * math.sqrt(s.R))) ** (2 / 3))
     if a_max > 0.5 * s.R:
-        raise ValueError(f"scene key 'N_max' gives a contact radius {a_max:.3g} m > R/2: outside "
-                         "the small-strain contact theory")
+        raise ValueError(f"scene keys 'N_max', 'E_star' and 'R' give a contact radius "
+                         f"{a_max:.3g} m > R/2 = {0.5 * s.R:.3g} m at N_max: outside the "
+                         "small-strain contact theory (lower N_max or raise E_star or R)")
     return s
 
 
@@ -150,6 +156,9 @@ def load_scene(scene: str | os.PathLike | dict | Scene = "default", **overrides)
     keyword overrides.  Every field is required in the file."""
     if isinstance(scene, Scene):
         return scene.replace(**overrides) if overrides else scene
+    if not isinstance(scene, (str, os.PathLike, dict)):
+        raise ValueError(f"scene must be a shipped scene name ({', '.join(list_scenes())}), a "
+                         f"path to a YAML file, a dict or a Scene, got {scene!r}")
     if isinstance(scene, dict):
         raw = dict(scene)
         src = "<dict>"

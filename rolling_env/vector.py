@@ -24,7 +24,8 @@ from gymnasium.utils import seeding
 
 from . import _envkernel as EK
 from . import _kernel as K
-from .env import OBS_NAMES, build_drive, info_dict, load_actions, raise_step_error, sample_target
+from .env import (OBS_NAMES, build_drive, check_time_limit, info_dict, load_actions,
+                  raise_step_error, sample_target)
 from .scenes import load_scene
 
 PARALLEL_MIN_ENVS = 4
@@ -39,8 +40,7 @@ class BatchCore:
         n = int(num_envs)
         self.num_envs = n
         self.scene = load_scene(scene, **overrides)
-        self.max_episode_steps = (self.scene.episode_steps if max_episode_steps is None
-                                  else int(max_episode_steps))
+        self.max_episode_steps = check_time_limit(max_episode_steps, self.scene)
         drive, self.a_max = build_drive(self.scene)
         self.drive = drive  # template (grid, scales)
         self.features = drive.kernel_features + (None,)  # (mu, mass, load, ledger)

@@ -88,7 +88,7 @@ def test_reward_is_exact_sum_of_terms(scene):
         assert info["reward_wear"] <= 0.0 and info["reward_track"] <= 0.0
 
 
-def test_truncation_from_registration_and_reset_after():
+def test_truncation_by_time_limit_and_reset_after():
     env = gym.make("RollingDrive-v0", max_episode_steps=7)
     env.reset(seed=0)
     flags = [env.step(np.zeros(3, np.float32))[3] for _ in range(7)]
@@ -97,12 +97,34 @@ def test_truncation_from_registration_and_reset_after():
     assert obs[9] == 0.0, "time fraction restarts at 0 after reset"
     _, _, term, trunc, _ = env.step(np.zeros(3, np.float32))
     assert not term and not trunc
-    assert gym.spec("RollingDrive-v0").max_episode_steps == rolling_env.DEFAULT_EPISODE_STEPS
 
 
-def test_make_uses_scene_episode_steps():
-    env = rolling_env.make("default", episode_steps=11)
-    assert env.spec.max_episode_steps == 11
+@pytest.mark.parametrize("make", [
+    lambda **kw: gym.make("RollingDrive-v0", **kw),
+    lambda **kw: rolling_env.make("default", **kw),
+])
+def test_episode_ends_at_the_scene_episode_steps(make):
+    """gym.make and rolling_env.make truncate at the (overridden) episode_steps, exactly when
+    the observation's time_fraction reaches 1."""
+    env = make(episode_steps=11)
+    env.reset(seed=0)
+    for k in range(1, 12):
+        obs, _, term, trunc, _ = env.step(np.zeros(3, np.float32))
+        assert not term and trunc == (k == 11), f"step {k}: truncated={trunc}"
+    assert obs[9] == 1.0, f"time_fraction at the end is {obs[9]}"
+    env = make()
+    env.reset(seed=0)
+    flags = [env.step(np.zeros(3, np.float32))[3] for _ in range(512)]
+    assert flags.index(True) == 511, "shipped scenes end after 512 steps"
+
+
+def test_time_limit_longer_than_the_episode_is_rejected():
+    with pytest.raises(ValueError, match=r"max_episode_steps must be an integer in \[1, 512\]"
+                       r".*episode_steps=1000"):
+        rolling_env.make("default", max_episode_steps=1000)
+    with pytest.raises(ValueError, match="episode_steps"):
+        gym.make_vec("RollingDrive-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                     max_episode_steps=1000)
 
 
 def test_target_option_and_sampled_range():
@@ -118,7 +140,9 @@ def test_target_option_and_sampled_range():
 
 
 @pytest.mark.parametrize("bad", [np.array([np.nan, 0, 0]), np.array([0, np.inf, 0]),
-                                 np.zeros(2), np.zeros((3, 1)), np.array([1.5, 0, 0])])
+                                 np.zeros(2), np.zeros((3, 1)), np.array([1.5, 0, 0]),
+                                 np.array([1 + 2j, 0, 0]), np.array(["1", "0", "0"]),
+                                 [True, False, False], [0.1, None, 0.0]])
 def test_bad_actions_raise(bad):
     env = gym.make("RollingDrive-v0").unwrapped
     env.reset(seed=0)
@@ -244,3 +268,21 @@ def test_denormal_rolling_action_right_after_reset(scene):
     env.reset(seed=0)
     obs, reward, *_ = env.step(np.array([0.5, 1e-310, 0.0]))
     assert np.all(np.isfinite(obs)) and np.isfinite(reward)
+
+
+def test_numpy_scalar_overrides_and_scene_types():
+    """Overrides from numpy sweeps (np.float32, np.int64) are numbers like any other; a scene
+    that is not a name, path, dict or Scene is a ValueError listing what is allowed."""
+    env = gym.make("RollingDrive-v0", mu=np.float32(0.25), sub_steps=np.int64(4),
+                   resolution=np.int64(8))
+    sc = env.unwrapped.scene
+    assert sc.mu == pytest.approx(0.25) and sc.sub_steps == 4 and type(sc.sub_steps) is int
+    with pytest.raises(ValueError, match=r"'sub_steps' must be an integer in \[1, 100000\], got 0"):
+        gym.make("RollingDrive-v0", sub_steps=np.int64(0))
+    with pytest.raises(ValueError, match="'mu' must be a number"):
+        gym.make("RollingDrive-v0", mu=np.bool_(True))
+    for bad in (3, None):
+        with pytest.raises(ValueError, match="scene must be a shipped scene name"):
+            gym.make("RollingDrive-v0", scene=bad)
+    with pytest.raises(ValueError, match="'E_star'"):
+        gym.make("RollingDrive-v0", E_star=1.0)
