@@ -585,6 +585,15 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
                         ei = L[i, 1] + s * (L[i, 2] + s * L[i, 3])
                         if abs(Ut) > Li and Ut != 0.0:
                             ei *= (Li / Ut) * (Li / Ut)
+                        elif Li == 0.0 and ei > 0.0:
+                            # a cell that left the contact entirely (Ut = Li = 0) released no
+                            # more than it could hold at the start of the sub-step (its limit
+                            # only falls as it leaves): bounds its unclipped creep integral
+                            xL = x_lo + i * dx
+                            l0 = _overlap(xL, xL + dx, c0, a)
+                            if l0 > 0.0:
+                                L0 = muEG * _normal_content(xL, xL + dx, c0, a, d, inv3R)
+                                ei = min(ei, 0.5 * L0 * L0 / l0)
                         rel += ei
                     ex = abs(Ut) - Li
                     if ex > 0.0 or (last and ex < -1e-12 * Li):

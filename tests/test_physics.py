@@ -146,6 +146,17 @@ def test_energy_is_not_created(r, mu, eps):
     assert -2e-3 < res["energy_residual"] < 5e-2, res
 
 
+def test_energy_ledger_is_scale_free_in_mu():
+    """With full sliding every energy scales with mu, so the relative residual must not depend
+    on mu.  (The release energy of a cell leaving the contact within a sub-step was booked from
+    its unclipped creep, a mu-independent amount: -25% at mu = 1e-6 before it was bounded by
+    what the cell can hold.)"""
+    res = [ex.simulate(0.7, 0.1, 2.5, 0.3, mu=mu, periods=4, resolution=16)["energy_residual"]
+           for mu in (1e-2, 1e-4, 1e-7)]
+    assert all(-2e-3 < x < 5e-2 for x in res), f"residuals {res}"
+    assert max(res) - min(res) < 2e-4, f"residual depends on mu: {res}"
+
+
 def test_energy_residual_prescribed_runner_small():
     wave = SquareWave(0.7, 0.1, 2.5, GEO.a1, GEO.R, GEO.tau)
     drv = _drive(resolution=64, stroke=wave.stroke)
