@@ -308,17 +308,17 @@ def _solve_bracketed(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st):
     """Safeguarded Newton/bisection for the runner velocity with finite friction.
 
     Root in v of g(v) = mass (v - v0) - dt (T(s0 - v) + F), T the sum of the clipped contents
-    A_i + B_i s.  g is monotone and piecewise linear; the bracket is where every cell is
-    saturated on either side.  Starts from ``vv``.  The fast path in ``_tick`` (one Newton step
-    on the piece active at v0, verified in the commit pass) needs this only when the step
-    crosses a kink.
+    A_i + B_i s.  g is monotone and piecewise linear.  Outside the bracket where some cell
+    is unsaturated every cell is saturated, T is constant and g is linear with slope
+    ``mass``: a root there is taken in closed form, so a very light runner (a huge
+    dt T / mass) costs no more iterations than a heavy one.  Inside, safeguarded Newton from
+    ``vv``.  The fast path in ``_tick`` (one Newton step on the piece active at v0, verified
+    in the commit pass) needs this only when the step crosses a kink.
     """
     s_hi = -np.inf
     s_lo = np.inf
-    SL = 0.0
     for i in range(i0, i1 + 1):
         Bi = B[i]
-        SL += L[i, 0]
         if Bi > 0.0:
             sh = (L[i, 0] - A[i]) / Bi
             sl = (-L[i, 0] - A[i]) / Bi
@@ -326,27 +326,26 @@ def _solve_bracketed(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st):
                 s_hi = sh
             if sl < s_lo:
                 s_lo = sl
-    if s_hi < s_lo:  # no cell in contact
+    if s_hi < s_lo:  # no cell in contact: s = 0 (the limit of a vanishing contact) if massless
         s_hi = 0.0
         s_lo = 0.0
     v_lo = s0 - s_hi
     v_hi = s0 - s_lo
-    if mass > 0.0:
-        v_lo = min(v_lo, v0 + dt * (F - SL) / mass)
-        v_hi = max(v_hi, v0 + dt * (F + SL) / mass)
+    # g at the bracket's ends; beyond them T is constant
+    g_lo, T_lo, _a, _d = _g_eval(A, B, L, i0, i1, s0 - v_lo, v_lo, v0, mass, F, dt, st)
+    if g_lo >= 0.0:
+        if mass > 0.0:
+            return v0 + dt * (T_lo + F) / mass
+        return v_lo  # massless and every cell saturated: sliding (flagged by the caller)
+    g_hi, T_hi, _a, _d = _g_eval(A, B, L, i0, i1, s0 - v_hi, v_hi, v0, mass, F, dt, st)
+    if g_hi <= 0.0:
+        if mass > 0.0:
+            return v0 + dt * (T_hi + F) / mass
+        return v_hi
     vv = min(max(vv, v_lo), v_hi)
     for _it in range(200):
-        st[ST_ITER] += 1.0
         s = s0 - vv
-        Tt = 0.0
-        Ta = 0.0
-        dT = 0.0
-        for i in range(i0, i1 + 1):
-            Ut, dU = _clip_slope(A[i] + B[i] * s, L[i, 0], B[i])
-            dT += dU
-            Tt += Ut
-            Ta += abs(Ut)
-        g = mass * (vv - v0) - dt * (Tt + F)
+        g, _t, Ta, dT = _g_eval(A, B, L, i0, i1, s, vv, v0, mass, F, dt, st)
         if _converged(g, mass, vv, v0, dt, Ta, F):
             break
         if g > 0.0:
@@ -361,6 +360,21 @@ def _solve_bracketed(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st):
             vn = 0.5 * (v_lo + v_hi)
         vv = vn
     return vv
+
+
+@njit(cache=True, inline="always")
+def _g_eval(A, B, L, i0, i1, s, vv, v0, mass, F, dt, st):
+    """g(vv) of ``_solve_bracketed`` at s = s0 - vv: returns (g, T, sum |U_i|, dT/ds)."""
+    st[ST_ITER] += 1.0
+    Tt = 0.0
+    Ta = 0.0
+    dT = 0.0
+    for i in range(i0, i1 + 1):
+        Ut, dU = _clip_slope(A[i] + B[i] * s, L[i, 0], B[i])
+        dT += dU
+        Tt += Ut
+        Ta += abs(Ut)
+    return mass * (vv - v0) - dt * (Tt + F), Tt, Ta, dT
 
 
 @njit(cache=True, inline="always")

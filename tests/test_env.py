@@ -286,3 +286,17 @@ def test_numpy_scalar_overrides_and_scene_types():
             gym.make("RollingDrive-v0", scene=bad)
     with pytest.raises(ValueError, match="'E_star'"):
         gym.make("RollingDrive-v0", E_star=1.0)
+
+
+def test_vanishing_runner_mass_tends_to_massless():
+    """runner_mass = 1e-100 kg is a valid scene value and must behave like 0 (massless): the
+    same trajectory to 1e-9 of its size (it once drifted to x* ~ -1e27 m with finite friction)."""
+    runs = {}
+    for m in (0.0, 1e-100):
+        env = gym.make("RollingDrive-v0", runner_mass=m)
+        env.reset(seed=3)
+        env.action_space.seed(3)
+        runs[m] = np.array([env.step(env.action_space.sample())[4]["xstar"] for _ in range(200)])
+    scale = np.max(np.abs(runs[0.0]))
+    err = np.max(np.abs(runs[1e-100] - runs[0.0]))
+    assert scale > 0 and err <= 1e-9 * scale, f"x* differs by {err:.3g} m (scale {scale:.3g} m)"

@@ -127,6 +127,22 @@ def test_massless_runner_has_no_net_motion(mu):
     assert abs(r["mean_v_star_over_omega_R"]) < 1e-6, r
 
 
+@pytest.mark.parametrize("mu", [math.inf, 0.3])
+@pytest.mark.parametrize("r", [1e8, 1e32, 1e100])
+def test_very_light_runner_tends_to_massless(r, mu):
+    """omega_n/Omega up to the top of its range behaves like the massless runner: same mean
+    velocity (within 1e-6 omega R) and a bounded trajectory (|v*| <= 2 omega R every tick).
+    The finite-friction solver once widened its bracket by dt T / m and ran out of
+    iterations: x* ~ 1e26 m at r = 1e50."""
+    args = (0.7, 0.995 if math.isfinite(mu) else 0.1, 2.5)
+    light = ex.simulate(*args, r, mu=mu, periods=6, record=True)
+    massless = ex.simulate(*args, math.inf, mu=mu, periods=6)
+    dv = abs(light["mean_v_star_over_omega_R"] - massless["mean_v_star_over_omega_R"])
+    assert dv < 1e-6, f"r = {r:g}: mean v* differs from massless by {dv:.2e} omega R"
+    vmax = np.max(np.abs(light["trajectory"]["vstar"])) / light["wave"].omega_R
+    assert vmax <= 2.0, f"r = {r:g}: |v*| reached {vmax:.3g} omega R"
+
+
 def test_resonant_band_exceeds_quasi_static_and_stiff_runner_collapses():
     """physics.md: mean velocity above Eq. 32 around omega_n/Omega ~ 0.5-1, nearly zero from ~2."""
     eq = analytic.eq32(0.7, 0.1, 2.5)
