@@ -41,6 +41,7 @@ from rolling_env import analytic
 from rolling_env.actions import from_controls
 from rolling_env.env import OBS_NAMES
 from rolling_env.scenes import Scene
+from rolling_env.validation import check_range
 
 
 @dataclass(frozen=True)
@@ -64,6 +65,9 @@ class Eq32Design:
 
     def __post_init__(self):
         sc = self.scene
+        check_range("w_pref", self.w_pref, 2.0, 1e6)  # Eq. 32 holds for w >= 2 only
+        check_range("slip_margin", self.slip_margin, 0.0, 1.0, lo_open=True)
+        check_range("delta_pref", self.delta_pref, 0.0, 1.0, lo_open=True)
         w_rate, w_stroke = self._w_limits()
         if min(w_rate, w_stroke) < 2.0:
             need_rate = 2.0 * self.a1 / (self.half_ticks * sc.dt)

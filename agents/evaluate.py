@@ -23,7 +23,7 @@ import rolling_env
 from rolling_env.rollout import rollout
 from rolling_env.scenes import load_scene
 
-from .baselines import Eq32Feedback, Eq32OpenLoop
+from .baselines import Eq32Design, Eq32Feedback, Eq32OpenLoop
 from .common import atomic_write
 
 EVAL_SEED = 20261122  # held out: training uses seeds < 1e6, evaluation envs seed + 10000
@@ -292,7 +292,7 @@ def main(argv=None):
         p.error(f"--episodes must be >= 1, got {args.episodes}")
     for scene in args.scenes:  # every scene checked before anything is written
         try:
-            load_scene(scene)
+            Eq32Design(load_scene(scene))  # the scene, and that the baselines can drive it
         except ValueError as e:
             p.error(f"--scenes: {e}")
     out, runs = Path(args.out), Path(args.runs)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 import rolling_env
 from agents.baselines import Eq32Design, Eq32Feedback, Eq32OpenLoop
@@ -298,3 +299,21 @@ def test_baseline_rejects_a_scene_too_slow_for_eq32():
         Eq32Feedback.from_env(env)
     with pytest.raises(ValueError, match="stroke_roll"):
         Eq32OpenLoop.from_env(rolling_env.make("default", stroke_roll=1e-5))
+    for kw, name in ((dict(w_pref=1.9), "w_pref"), (dict(slip_margin=0.0), "slip_margin"),
+                     (dict(delta_pref=1.5), "delta_pref")):
+        with pytest.raises(ValueError, match=name):
+            Eq32Feedback.from_env(rolling_env.make("default"), **kw)
+
+
+def test_evaluate_rejects_a_scene_the_baselines_cannot_drive(tmp_path, capsys):
+    """A valid scene file that Eq. 32 cannot drive (w < 2) is refused before anything is
+    written, not after the other scenes were evaluated."""
+    from agents.evaluate import main as evaluate_main
+    slow = tmp_path / "slow.yaml"
+    data = yaml.safe_load((rolling_env.scenes.SCENE_DIR / "default.yaml").read_text())
+    slow.write_text(yaml.safe_dump({**data, "omega_R_max": 0.1}))
+    with pytest.raises(SystemExit) as e:
+        evaluate_main(["--scenes", "heavy_inf_friction", str(slow), "--runs", str(tmp_path),
+                       "--episodes", "1", "--out", str(tmp_path / "out")])
+    assert e.value.code == 2 and "omega_R_max" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
