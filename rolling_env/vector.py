@@ -34,6 +34,10 @@ PARALLEL_MIN_ENVS = 4
 class BatchCore:
     """N envs of one scene: state arrays with a leading env axis, ``step``, ``reset(mask)``."""
 
+    #: attributes holding one entry per env (leading axis num_envs); the rest is shared
+    PER_ENV = frozenset({"U", "A", "B", "L", "st", "p", "target", "steps", "act", "out",
+                         "obs", "extra", "rngs"})
+
     def __init__(self, num_envs: int, scene="default", max_episode_steps=None, **overrides):
         if int(num_envs) != num_envs or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs}")
@@ -222,12 +226,12 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
     def close(self):
         pass
 
-    # Attributes and methods live on the batch (``BatchCore``).  A per-env array (leading axis
-    # num_envs, e.g. ``target``, ``steps``) is read and written per index; anything else is
-    # shared by the batch: read for every index, written only for all envs at once.
+    # Attributes and methods live on the batch (``BatchCore``).  Its per-env state
+    # (``BatchCore.PER_ENV``: ``target``, ``steps``, ``rngs``, ...) is read and written per
+    # index; anything else is shared by the batch: read for every index, written only for
+    # all envs at once.
     def _per_env(self, attr_name) -> bool:
-        value = getattr(self.core, attr_name)
-        return isinstance(value, np.ndarray) and value.shape[:1] == (self.num_envs,)
+        return attr_name in BatchCore.PER_ENV
 
     def get_attr(self, attr_name, indices=None):
         idx = list(self._get_indices(indices))
@@ -245,7 +249,12 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
             raise AttributeError(f"RollingDriveVecEnv has no attribute {attr_name!r}")
         idx = list(self._get_indices(indices))
         if self._per_env(attr_name):
-            getattr(self.core, attr_name)[idx] = value
+            target = getattr(self.core, attr_name)
+            if isinstance(target, list):
+                for i in idx:
+                    target[i] = value
+            else:
+                target[idx] = value
         elif sorted(idx) == list(range(self.num_envs)):
             setattr(self.core, attr_name, value)
         else:

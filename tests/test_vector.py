@@ -150,6 +150,21 @@ def test_sb3_vecenv_per_env_options_and_indices():
         v.env_method("seed", 1, indices=[1])
 
 
+def test_shared_attributes_stay_shared_whatever_the_batch_size():
+    """Per-env or shared is decided by name, not by a leading length that happens to equal
+    num_envs: with as many envs as the scene vector has entries, ``sv`` is still shared and
+    the per-env random generators are still per env."""
+    core = RollingDriveVecEnv(1).core
+    n = core.sv.shape[0]
+    v = RollingDriveVecEnv(n)
+    sv = v.get_attr("sv", indices=[1])[0]
+    assert isinstance(sv, np.ndarray) and sv.shape == (n,), "sv was split per env"
+    rngs = v.get_attr("rngs", indices=[0, 2])
+    assert rngs[0] is v.core.rngs[0] and rngs[1] is v.core.rngs[2]
+    with pytest.raises(NotImplementedError, match="shared by every env"):
+        v.set_attr("sv", sv, indices=[1])
+
+
 def test_gymnasium_vector_env_accepts_a_list_of_seeds():
     """reset(seed=[s0, s1, ...]) seeds env i with s_i, like Gymnasium's own vector envs."""
     venv = gym.make_vec("RollingDrive-v0", num_envs=3, vectorization_mode="vector_entry_point")
