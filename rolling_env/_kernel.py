@@ -601,13 +601,17 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
                             ei *= (Li / Ut) * (Li / Ut)
                         elif Li == 0.0 and ei > 0.0:
                             # a cell that left the contact entirely (Ut = Li = 0) released no
-                            # more than it could hold at the start of the sub-step (its limit
-                            # only falls as it leaves): bounds its unclipped creep integral
+                            # more than it could hold where the contact centre came closest
+                            # to it in the sub-step (limit and overlap both peak there): bounds
+                            # its unclipped creep integral.  For a cell on the trailing half
+                            # (the usual case: the patch moves less than a per sub-step) that
+                            # point is c0.
                             xL = x_lo + i * dx
-                            l0 = _overlap(xL, xL + dx, c0, a)
-                            if l0 > 0.0:
-                                L0 = muEG * _normal_content(xL, xL + dx, c0, a, d, inv3R)
-                                ei = min(ei, 0.5 * L0 * L0 / l0)
+                            cn = min(max(xL + 0.5 * dx, min(c0, c1)), max(c0, c1))
+                            ln = _overlap(xL, xL + dx, cn, a)
+                            if ln > 0.0:
+                                Ln = muEG * _normal_content(xL, xL + dx, cn, a, d, inv3R)
+                                ei = min(ei, 0.5 * Ln * Ln / ln)
                         rel += ei
                     ex = abs(Ut) - Li
                     if ex > 0.0 or (last and ex < -1e-12 * Li):
