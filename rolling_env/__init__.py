@@ -25,7 +25,8 @@ def make(scene="default", **kwargs):
     sc = load_scene(scene, **{k: v for k, v in kwargs.items() if k not in _MAKE_KEYS})
     extra = {k: v for k, v in kwargs.items() if k in _MAKE_KEYS}
     from .env import check_time_limit
-    check_time_limit(extra.get("max_episode_steps"), sc)
+    if extra.get("max_episode_steps") is not None:
+        extra["max_episode_steps"] = check_time_limit(extra["max_episode_steps"], sc)
     return gym.make("RollingDrive-v0", scene=sc, **extra)
 
 

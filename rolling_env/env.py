@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import numbers
 
 import gymnasium as gym
 import numpy as np
@@ -89,8 +90,11 @@ class RollingDriveEnv(gym.Env):
     ``episode_steps`` ticks (512 in the shipped scenes; ``episode_steps=n`` overrides it), the
     same count that ``time_fraction`` uses.  ``gym.make(..., max_episode_steps=n)`` adds a
     ``TimeLimit`` that can end episodes earlier.  One longer than ``episode_steps`` could never
-    be reached: ``rolling_env.make``, ``gym.make_vec`` and the batched envs reject it (set
-    ``episode_steps`` instead); behind ``gym.make`` the wrapper is invisible to the env.
+    be reached: ``rolling_env.make``, ``gym.make_vec`` in its default mode (this env's
+    ``vector_entry_point``) and the batched envs reject it (set ``episode_steps`` instead).
+    ``gym.make`` and ``make_vec``'s "sync"/"async" modes hide their ``TimeLimit`` from the env
+    (Gymnasium gives the env a spec without ``max_episode_steps``), so there a longer limit has
+    no effect: episodes still end at ``episode_steps``.
 
     ## Arguments
     ``gym.make("RollingDrive-v0", scene="default", render_mode=None, **overrides)``: ``scene``
@@ -137,7 +141,6 @@ class RollingDriveEnv(gym.Env):
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed=None, options=None):
-        check_time_limit(getattr(self.spec, "max_episode_steps", None), self.scene)
         super().reset(seed=seed)
         self._target[0] = sample_target(self.scene, self.np_random, options)
         self.drive.reset()
@@ -195,16 +198,21 @@ def build_drive(scene: Scene) -> tuple[Drive, float]:
 
 
 def check_time_limit(max_episode_steps, scene: Scene) -> int:
-    """Episode length: the scene's ``episode_steps``, or a shorter ``max_episode_steps``; a
-    longer one raises (the env ends episodes at ``episode_steps``)."""
+    """Episode length: the scene's ``episode_steps``, or a shorter ``max_episode_steps`` (an
+    integer, or a float with an integer value); a longer one raises (the env ends episodes at
+    ``episode_steps``), as do zero, negatives, non-integers, inf, NaN and booleans."""
     n = scene.episode_steps
-    if max_episode_steps is None:
+    m = max_episode_steps
+    if m is None:
         return n
-    if int(max_episode_steps) != max_episode_steps or not 1 <= max_episode_steps <= n:
+    ok = (isinstance(m, numbers.Real) and not isinstance(m, (bool, np.bool_))
+          and math.isfinite(m) and m == int(m))
+    if not ok or not 1 <= int(m) <= n:
+        hint = (f"; pass episode_steps={int(m)} to lengthen episodes" if ok and int(m) > n
+                else "")
         raise ValueError(f"max_episode_steps must be an integer in [1, {n}] (the scene's "
-                         f"episode_steps; pass episode_steps={max_episode_steps} to lengthen "
-                         f"episodes), got {max_episode_steps!r}")
-    return int(max_episode_steps)
+                         f"episode_steps{hint}), got {m!r}")
+    return int(m)
 
 
 def sample_target(scene: Scene, rng, options) -> float:

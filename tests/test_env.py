@@ -1,6 +1,7 @@
 """RollingDrive-v0 checked like Gymnasium's own envs (tests/envs/test_envs.py)."""
 from __future__ import annotations
 
+import math
 import pickle
 import subprocess
 import sys
@@ -125,6 +126,25 @@ def test_time_limit_longer_than_the_episode_is_rejected():
     with pytest.raises(ValueError, match="episode_steps"):
         gym.make_vec("RollingDrive-v0", num_envs=2, vectorization_mode="vector_entry_point",
                      max_episode_steps=1000)
+
+
+@pytest.mark.parametrize("bad", [0, -3, 2.5, math.inf, math.nan, True, "100", np.bool_(True)])
+def test_bad_time_limits_are_rejected_without_the_lengthen_hint(bad):
+    """Only a too-long limit suggests episode_steps; the rest get the range (inf was an
+    OverflowError, True was accepted as 1)."""
+    with pytest.raises(ValueError, match=r"max_episode_steps must be an integer in \[1, 512\]"
+                       r"[^;]*got") as e:
+        rolling_env.make("default", max_episode_steps=bad)
+    assert "lengthen" not in str(e.value), str(e.value)
+
+
+def test_numpy_integer_and_integral_float_time_limits():
+    """np.int64(5) and 5.0 are accepted and reach Gymnasium's TimeLimit as the int 5."""
+    for m in (np.int64(5), 5.0):
+        env = rolling_env.make("default", max_episode_steps=m)
+        env.reset(seed=0)
+        flags = [env.step(np.zeros(3, np.float32))[3] for _ in range(5)]
+        assert flags == [False] * 4 + [True], f"max_episode_steps={m!r}: {flags}"
 
 
 def test_target_option_and_sampled_range():
