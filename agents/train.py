@@ -104,18 +104,19 @@ def _eval_callback(eval_env, run: Path, eval_freq: int, n_episodes: int):
                         verbose=0, callback_on_new_best=OnNewBest(), callback_after_eval=AfterEval())
 
 
-def train(args) -> Path:
+class UsageError(ValueError):
+    """A bad scene, hyper-parameter or argument, found before training starts."""
+
+
+def _setup(args):
+    """Hyper-parameters, envs (the scene checked) and the model; then the run folder with its
+    config, so that a bad scene or hyper-parameter leaves nothing behind."""
     import numpy as np
     import stable_baselines3 as sb3
-    import torch
-    from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.noise import NormalActionNoise
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecNormalize
 
-    import rolling_env
-
-    torch.set_num_threads(1)
     scene = args.scene
     hp = load_hyperparams(args.algo, scene_key(scene), args.conf)
     n_envs = int(args.n_envs if args.n_envs is not None else hp.get("n_envs", 1))
@@ -125,18 +126,10 @@ def train(args) -> Path:
     if n_envs < 1 or n_timesteps < 1:
         raise ValueError(f"n_envs and n_timesteps must be >= 1 (from {args.conf or 'the YAML'}),"
                          f" got {n_envs} and {n_timesteps}")
-    # the envs are built (and the scene checked) before the run folder: a bad scene leaves
-    # nothing behind
     set_random_seed(args.seed)
     env = make_vec_env(scene, n_envs, args.seed, env_kwargs)
     eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs)
     run = Path(args.run_dir or f"runs/{Path(scene).stem}/{args.algo}_seed{args.seed}")
-    run.mkdir(parents=True, exist_ok=True)
-    cfg = dict(hp, n_envs=n_envs, n_timesteps=n_timesteps, algo=args.algo, scene=scene,
-               seed=args.seed)
-    atomic_write(run / "config.yml", lambda p: Path(p).write_text(yaml.safe_dump(cfg)))
-    atomic_write(run / "command.txt", lambda p: Path(p).write_text(" ".join(sys.argv) + "\n"))
-
     norm = parse_kwargs(hp.get("normalize", False))
     if norm is not None:
         env = VecNormalize(env, gamma=float(hp.get("gamma", 0.99)), **norm)
@@ -144,11 +137,33 @@ def train(args) -> Path:
                                 norm_obs=norm.get("norm_obs", True))
     kwargs = {k: hp[k] for k in _ALGO_KEYS[args.algo] if k in hp}
     if args.algo == "td3" and hp.get("noise_type") == "normal":
-        kwargs["action_noise"] = NormalActionNoise(np.zeros(3), float(hp["noise_std"]) * np.ones(3))
+        kwargs["action_noise"] = NormalActionNoise(np.zeros(3),
+                                                   float(hp["noise_std"]) * np.ones(3))
     cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[args.algo]
     model = cls(hp.get("policy", "MlpPolicy"), env, seed=args.seed, verbose=0, device="cpu",
                 tensorboard_log=str(run / "tb"),
                 policy_kwargs=parse_kwargs(hp.get("policy_kwargs")), **kwargs)
+    run.mkdir(parents=True, exist_ok=True)
+    cfg = dict(hp, n_envs=n_envs, n_timesteps=n_timesteps, algo=args.algo, scene=scene,
+               seed=args.seed)
+    atomic_write(run / "config.yml", lambda p: Path(p).write_text(yaml.safe_dump(cfg)))
+    atomic_write(run / "command.txt", lambda p: Path(p).write_text(" ".join(sys.argv) + "\n"))
+    return model, eval_env, run, n_envs, n_timesteps
+
+
+def train(args) -> Path:
+    import stable_baselines3 as sb3
+    import torch
+    from stable_baselines3.common.callbacks import CallbackList
+
+    import rolling_env
+
+    torch.set_num_threads(1)
+    try:  # an error while learning is not a usage error: it propagates with its traceback
+        model, eval_env, run, n_envs, n_timesteps = _setup(args)
+    except ValueError as e:
+        raise UsageError(str(e)) from e
+    scene = args.scene
     callbacks = CallbackList([
         _eval_callback(eval_env, run, max(args.eval_freq // n_envs, 1), args.eval_episodes),
         _AtomicCheckpoint.make(run, max(args.checkpoint_freq, 1)),
@@ -192,7 +207,7 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     try:
         train(args)
-    except ValueError as e:  # a bad scene or hyper-parameter: one line, exit 2, no run folder
+    except UsageError as e:  # a bad scene or hyper-parameter: one line, exit 2, no run folder
         print(f"python -m agents.train: error: {e}", file=sys.stderr)
         return 2
     return 0

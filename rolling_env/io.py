@@ -15,8 +15,7 @@ def atomic_write(path: str | os.PathLike, writer) -> Path:
     os.close(fd)
     try:
         writer(tmp)
-        # mkstemp makes the file owner-only (0600); give it the mode a plain open() would
-        os.chmod(tmp, 0o666 & ~_umask())
+        _give_mode(tmp, path)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -25,10 +24,24 @@ def atomic_write(path: str | os.PathLike, writer) -> Path:
     return path
 
 
-def _umask() -> int:
-    mask = os.umask(0o022)
+def _read_umask() -> int:
+    mask = os.umask(0o022)  # the only way to read it; done once, at import, not per write
     os.umask(mask)
     return mask
+
+
+_UMASK = _read_umask()
+
+
+def _give_mode(tmp, path: Path) -> None:
+    """mkstemp makes the file owner-only (0600); give it the mode a plain open() would: an
+    existing file's own mode (open() keeps it when overwriting), else 0666 less the umask.
+    Where the file system refuses chmod, the write still goes ahead."""
+    try:
+        mode = path.stat().st_mode & 0o7777 if path.exists() else 0o666 & ~_UMASK
+        os.chmod(tmp, mode)
+    except OSError:
+        pass
 
 
 def write_text(path, text: str) -> Path:

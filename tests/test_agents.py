@@ -140,16 +140,17 @@ def test_atomic_write_never_leaves_partial_file(tmp_path):
 
 
 def test_atomic_write_gives_the_mode_of_a_plain_open(tmp_path):
-    """Results are readable like any file the user writes (umask applied), not owner-only."""
-    old = os.umask(0o022)
-    try:
-        plain = tmp_path / "plain.txt"
-        plain.write_text("x")
-        atomic_write(tmp_path / "atomic.txt", lambda p: Path(p).write_text("x"))
-    finally:
-        os.umask(old)
+    """Results are readable like any file the user writes (umask applied), not owner-only; an
+    existing file keeps its mode, as open() for writing keeps it."""
+    plain = tmp_path / "plain.txt"
+    plain.write_text("x")
+    atomic_write(tmp_path / "atomic.txt", lambda p: Path(p).write_text("x"))
     mode = (tmp_path / "atomic.txt").stat().st_mode & 0o777
-    assert mode == plain.stat().st_mode & 0o777 == 0o644, oct(mode)
+    assert mode == plain.stat().st_mode & 0o777, f"{oct(mode)} != plain {oct(plain.stat().st_mode)}"
+    for kept in (0o600, 0o640):
+        os.chmod(plain, kept)
+        atomic_write(plain, lambda p: Path(p).write_text("y"))
+        assert plain.stat().st_mode & 0o777 == kept and plain.read_text() == "y"
 
 
 def _train(tmp_path, *extra, timesteps=512, scene="default", n_envs=2):
@@ -252,6 +253,21 @@ def test_train_bad_scene_leaves_no_run_folder(tmp_path, capsys):
                        str(tmp_path / "run")]) == 2
     assert "unknown scene 'bogus'" in capsys.readouterr().err
     assert not (tmp_path / "run").exists(), "config.yml written before the scene was checked"
+
+
+def test_train_lets_an_error_while_learning_propagate(tmp_path, monkeypatch):
+    """Only a usage error (scene, hyper-parameter, argument) becomes a one-line exit 2; a
+    ValueError raised while learning keeps its traceback."""
+    import stable_baselines3 as sb3
+
+    from agents.train import main as train_main
+
+    def boom(self, *a, **k):
+        raise ValueError("raised inside learn")
+    monkeypatch.setattr(sb3.PPO, "learn", boom)
+    with pytest.raises(ValueError, match="raised inside learn"):
+        train_main(["--algo", "ppo", "--run-dir", str(tmp_path / "run"), "--n-timesteps", "64",
+                    "--no-progress"])
 
 
 def test_evaluate_checks_every_scene_before_writing(tmp_path, capsys):
