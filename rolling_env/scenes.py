@@ -104,9 +104,9 @@ def _coerce(key, value):
         raise ValueError(f"unknown scene key '{key}'; allowed keys: {', '.join(_FIELDS)}")
     typ, lo, hi, lo_open, allow_inf = _SPEC[key]
     if typ is bool:
-        if not isinstance(value, bool):
+        if not isinstance(value, (bool, np.bool_)):
             raise ValueError(f"scene key '{key}' must be true or false, got {value!r}")
-        return value
+        return bool(value)
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, str)):
         raise ValueError(f"scene key '{key}' must be a number, got {value!r}")  # numpy scalars ok
     if isinstance(value, str):

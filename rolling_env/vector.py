@@ -18,6 +18,8 @@ is faster on one thread too) and the rest the second core.
 """
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
@@ -29,6 +31,13 @@ from .env import (OBS_NAMES, build_drive, check_time_limit, info_dict, load_acti
 from .scenes import load_scene
 
 PARALLEL_MIN_ENVS = 4
+
+
+def _check_seed(seed, name: str) -> int:
+    """A seed as a Python int: a non-negative integer (numpy integers too), not a bool."""
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, numbers.Integral) or seed < 0:
+        raise ValueError(f"{name} must be a non-negative integer or None, got {seed!r}")
+    return int(seed)
 
 
 class BatchCore:
@@ -67,17 +76,21 @@ class BatchCore:
 
     def seed(self, seed=None):
         """Env i gets seed + i (Gymnasium's convention); None draws fresh entropy.  A sequence
-        of num_envs seeds (int or None each) seeds env i with seed[i] (None: left as is)."""
+        of num_envs seeds (int or None each) seeds env i with seed[i] (None: left as is).
+        Seeds are non-negative integers (numpy integers included); anything else raises."""
         if isinstance(seed, (list, tuple, np.ndarray)):
             if len(seed) != self.num_envs:
                 raise ValueError(f"seed must be an int, None or a sequence of num_envs = "
                                  f"{self.num_envs} seeds, got {len(seed)} seeds")
-            for i, s in enumerate(seed):
+            seeds = [None if s is None else _check_seed(s, f"seed[{i}]")
+                     for i, s in enumerate(seed)]
+            for i, s in enumerate(seeds):
                 if s is not None:
-                    self.rngs[i] = seeding.np_random(int(s))[0]
+                    self.rngs[i] = seeding.np_random(s)[0]
             return
+        base = None if seed is None else _check_seed(seed, "seed")
         for i in range(self.num_envs):
-            self.rngs[i] = seeding.np_random(None if seed is None else seed + i)[0]
+            self.rngs[i] = seeding.np_random(None if base is None else base + i)[0]
 
     def reset(self, mask=None, options=None) -> None:
         """Reset the envs where ``mask`` is True (all when None).  ``options``: one dict for
@@ -149,7 +162,7 @@ class RollingDriveVectorEnv(_gym_vector_base()):
     def reset(self, *, seed=None, options=None):
         if seed is not None:
             self.core.seed(seed)  # int: env i gets seed + i; or one seed (or None) per env
-            if isinstance(seed, (int, np.integer)):
+            if isinstance(seed, numbers.Integral):
                 self.action_space.seed(int(seed))
         self.core.reset(None, options)
         self._autoreset[:] = False

@@ -301,6 +301,10 @@ def test_numpy_scalar_overrides_and_scene_types():
         gym.make("RollingDrive-v0", sub_steps=np.int64(0))
     with pytest.raises(ValueError, match="'mu' must be a number"):
         gym.make("RollingDrive-v0", mu=np.bool_(True))
+    sc = gym.make("RollingDrive-v0", target_both_signs=np.bool_(False)).unwrapped.scene
+    assert sc.target_both_signs is False, "a numpy bool is a bool key's value like True/False"
+    with pytest.raises(ValueError, match="'target_both_signs' must be true or false"):
+        gym.make("RollingDrive-v0", target_both_signs=1)
     for bad in (3, None):
         with pytest.raises(ValueError, match="scene must be a shipped scene name"):
             gym.make("RollingDrive-v0", scene=bad)

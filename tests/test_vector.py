@@ -174,3 +174,18 @@ def test_gymnasium_vector_env_accepts_a_list_of_seeds():
         np.testing.assert_array_equal(obs_list[i], single, err_msg=f"env {i} seeded {s}")
     with pytest.raises(ValueError, match="num_envs = 3"):
         venv.reset(seed=[1, 2])
+
+
+def test_seeds_are_checked_integers():
+    """A numpy integer seeds like the int it equals; a fractional, negative or boolean seed
+    is an error naming it (1.5 was truncated to 1)."""
+    venv = gym.make_vec("RollingDrive-v0", num_envs=2, vectorization_mode="vector_entry_point")
+    a, _ = venv.reset(seed=np.int64(7))
+    b, _ = venv.reset(seed=7)
+    np.testing.assert_array_equal(a, b)
+    for bad, name in ((1.5, "seed"), (-1, "seed"), (True, "seed"), ([3, 2.5], r"seed\[1\]")):
+        with pytest.raises(ValueError, match=f"{name} must be a non-negative integer"):
+            venv.reset(seed=bad)
+    sb3_env = RollingDriveVecEnv(2)
+    sb3_env.seed(np.int64(7))
+    np.testing.assert_array_equal(sb3_env.reset(), a)
