@@ -332,12 +332,16 @@ def _solve_bracketed(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st):
     v_lo = s0 - s_hi
     v_hi = s0 - s_lo
     # g at the bracket's ends; beyond them T is constant
-    g_lo, T_lo, _a, _d = _g_eval(A, B, L, i0, i1, s0 - v_lo, v_lo, v0, mass, F, dt, st)
+    g_lo, T_lo, Ta, dT = _g_eval(A, B, L, i0, i1, s0 - v_lo, v_lo, v0, mass, F, dt, st)
+    if _converged(g_lo, mass, v_lo, v0, dt, Ta + dT * (abs(s0) + abs(v_lo)), F):
+        return v_lo
     if g_lo >= 0.0:
         if mass > 0.0:
             return v0 + dt * (T_lo + F) / mass
         return v_lo  # massless and every cell saturated: sliding (flagged by the caller)
-    g_hi, T_hi, _a, _d = _g_eval(A, B, L, i0, i1, s0 - v_hi, v_hi, v0, mass, F, dt, st)
+    g_hi, T_hi, Ta, dT = _g_eval(A, B, L, i0, i1, s0 - v_hi, v_hi, v0, mass, F, dt, st)
+    if _converged(g_hi, mass, v_hi, v0, dt, Ta + dT * (abs(s0) + abs(v_hi)), F):
+        return v_hi
     if g_hi <= 0.0:
         if mass > 0.0:
             return v0 + dt * (T_hi + F) / mass
@@ -346,7 +350,8 @@ def _solve_bracketed(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st):
     for _it in range(200):
         s = s0 - vv
         g, _t, Ta, dT = _g_eval(A, B, L, i0, i1, s, vv, v0, mass, F, dt, st)
-        if _converged(g, mass, vv, v0, dt, Ta, F):
+        # round-off of g: its terms, and the slope times the round-off of s = s0 - v
+        if _converged(g, mass, vv, v0, dt, Ta + dT * (abs(s0) + abs(vv)), F):
             break
         if g > 0.0:
             v_hi = vv

@@ -127,6 +127,7 @@ def force_sum(delta, eps, w, vstar_ratio, *, resolution=DEFAULT_RESOLUTION, peri
     return (T1 + T2) / (2 * geo.G_star * wave.a1 ** 2)
 
 
+ENERGY_FLOOR = 1e-9  # round-off floor of energy balances, in 2 G* a1^3 per period
 OMEGA_N_RATIO_RANGE = (1e-100, 1e100)  # finite nonzero r: m stays a finite positive double
 
 
@@ -165,7 +166,9 @@ def simulate(delta, eps, w, omega_n_ratio, *, mu=math.inf, periods=40,
 
     Returns ``mean_v_star_over_omega_R`` (mean runner velocity over the second half of the
     periods, paper convention), ``slip_work`` (per period, in units of 2 G* a1^3),
-    ``energy_residual`` (residual / drive work: positive = dissipated by the numerics),
+    ``energy_residual`` (residual / drive work: positive = dissipated by the numerics; the
+    work is floored at ``ENERGY_FLOOR`` x 2 G* a1^3 per period, so that a runner too light to
+    load the contact does not divide round-off by round-off),
     ``seconds``; with ``record`` also the per-tick trajectory."""
     _check_common(delta, eps, w, resolution)
     check_omega_n_ratio(omega_n_ratio)
@@ -209,7 +212,8 @@ def simulate(delta, eps, w, omega_n_ratio, *, mu=math.inf, periods=40,
     res = {
         "mean_v_star_over_omega_R": float(direction * mean_v / wave.omega_R),
         "slip_work": float(e["slip"] / periods / unit),
-        "energy_residual": float(e["residual"] / (abs(e["drive"]) + abs(e["ext"]) + 1e-300)),
+        "energy_residual": float(e["residual"] / max(abs(e["drive"]) + abs(e["ext"]),
+                                                     ENERGY_FLOOR * unit * int(periods))),
         "seconds": seconds,
         "eq32": float(analytic.eq32(delta, eps, w)) if w >= 2 else None,
         "n_sub": int(n_sub), "resolution": resolution, "periods": int(periods),

@@ -36,7 +36,7 @@ from .io import write_text
 from .model import Drive, DriveParams
 
 RESID_TOL = 1e-2      # the ledger may not show energy created beyond 1% of the work put in
-FLOOR = 1e-9          # round-off floor of the energy checks, in 2 G* a1^3 per period
+FLOOR = ex.ENERGY_FLOOR  # round-off floor of the energy checks, in 2 G* a1^3 per period
 TIME_LIMIT = 60.0     # seconds per case on the 2-core machine
 STEP_TOL_REL = 0.02   # step check: relative change of the mean v* at 4x sub-steps ...
 STEP_TOL_ABS = 1e-4   # ... and absolute change in omega R (for runners that barely move)
@@ -351,7 +351,7 @@ def cases(quick=False):
     d, w, r = BASE["delta"], BASE["w"], BASE["r"]
     c = []
     rs = [1e-3, 1, 1e4, math.inf] if quick else \
-        [1e-3, 1e-2, 0.1, 1, 10, 1e2, 1e3, 1e4, math.inf]
+        [1e-3, 1e-2, 0.1, 1, 10, 1e2, 1e3, 1e4, 1e100, math.inf]
     for rr in rs:
         c.append((f"mass: omega_n/Omega = {rr:g}, mu = inf", _sim(d, EPS_STICK, w, rr)))
         if not quick:

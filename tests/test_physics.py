@@ -143,6 +143,19 @@ def test_very_light_runner_tends_to_massless(r, mu):
     assert vmax <= 2.0, f"r = {r:g}: |v*| reached {vmax:.3g} omega R"
 
 
+def test_very_light_runner_needs_few_solver_iterations(monkeypatch):
+    """The runner solver stays at a few evaluations per sub-step however light the runner:
+    a root on a kink at the bracket's end (an entering cell with a zero friction limit) is
+    accepted to the round-off of s = s0 - v instead of bisected towards (57 per sub-step at
+    omega_n/Omega = 1e100 before)."""
+    drives = []
+    orig = ex._drive
+    monkeypatch.setattr(ex, "_drive", lambda *a, **k: drives.append(orig(*a, **k)) or drives[-1])
+    res = ex.simulate(0.7, 0.995, 2.5, 1e100, mu=0.3, periods=4)
+    per_sub = drives[-1].st[K.ST_ITER] / (4 * 2 * res["n_sub"])
+    assert per_sub < 6, f"{per_sub:.1f} solver evaluations per sub-step"
+
+
 def test_resonant_band_exceeds_quasi_static_and_stiff_runner_collapses():
     """physics.md: mean velocity above Eq. 32 around omega_n/Omega ~ 0.5-1, nearly zero from ~2."""
     eq = analytic.eq32(0.7, 0.1, 2.5)
