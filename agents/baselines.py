@@ -67,7 +67,8 @@ class Eq32Design:
         sc = self.scene
         check_range("w_pref", self.w_pref, 2.0, 1e6)  # Eq. 32 holds for w >= 2 only
         check_range("slip_margin", self.slip_margin, 0.0, 1.0, lo_open=True)
-        check_range("delta_pref", self.delta_pref, 0.0, 1.0, lo_open=True)
+        # delta = 1 gives equal forces: Eq. 32 is zero for every creep and cannot be inverted
+        check_range("delta_pref", self.delta_pref, 0.0, 1.0, lo_open=True, hi_open=True)
         w_rate, w_stroke = self._w_limits()
         if min(w_rate, w_stroke) < 2.0:
             need_rate = 2.0 * self.a1 / (self.half_ticks * sc.dt)

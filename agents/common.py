@@ -22,6 +22,9 @@ def load_hyperparams(algo: str, scene: str, conf: str | os.PathLike | None = Non
     path = Path(conf) if conf else CONF_DIR / f"{algo}.yml"
     with open(path) as f:
         table = yaml.safe_load(f)
+    if not isinstance(table, dict) or not (scene in table or "RollingDrive-v0" in table):
+        raise ValueError(f"{path}: needs an entry for scene {scene!r} or for RollingDrive-v0 "
+                         "(RL Zoo format)")
     if scene in table:
         hp = dict(table[scene])
     else:

@@ -161,8 +161,13 @@ def train(args) -> Path:
     torch.set_num_threads(1)
     try:  # an error while learning is not a usage error: it propagates with its traceback
         model, eval_env, run, n_envs, n_timesteps = _setup(args)
-    except ValueError as e:
-        raise UsageError(str(e)) from e
+    except KeyError as e:
+        raise UsageError(f"hyper-parameter {e.args[0]!r} missing from "
+                         f"{args.conf or 'configs/hyperparams'}") from e
+    except (ValueError, TypeError, AssertionError, SyntaxError, OSError) as e:
+        # bad scene, hyper-parameter (SB3 asserts its own), unreadable --conf
+        raise UsageError(f"{type(e).__name__}: {e}" if not isinstance(e, ValueError)
+                         else str(e)) from e
     scene = args.scene
     callbacks = CallbackList([
         _eval_callback(eval_env, run, max(args.eval_freq // n_envs, 1), args.eval_episodes),

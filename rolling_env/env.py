@@ -11,7 +11,7 @@ from gymnasium import spaces
 from . import _envkernel as EK
 from . import _kernel as K
 from .model import Drive, DriveParams, check_flags
-from .scenes import Scene, load_scene
+from .scenes import EPISODE_STEPS_MAX, Scene, load_scene
 
 OBS_NAMES = (
     "error", "vstar", "roll_pos", "translate_pos", "normal_force", "tangential_force",
@@ -208,8 +208,8 @@ def check_time_limit(max_episode_steps, scene: Scene) -> int:
     ok = (isinstance(m, numbers.Real) and not isinstance(m, (bool, np.bool_))
           and math.isfinite(m) and m == int(m))
     if not ok or not 1 <= int(m) <= n:
-        hint = (f"; pass episode_steps={int(m)} to lengthen episodes" if ok and int(m) > n
-                else "")
+        hint = (f"; pass episode_steps={int(m)} to lengthen episodes"
+                if ok and n < int(m) <= EPISODE_STEPS_MAX else "")
         raise ValueError(f"max_episode_steps must be an integer in [1, {n}] (the scene's "
                          f"episode_steps{hint}), got {m!r}")
     return int(m)

@@ -38,7 +38,7 @@ def _give_mode(tmp, path: Path) -> None:
     existing file's own mode (open() keeps it when overwriting), else 0666 less the umask.
     Where the file system refuses chmod, the write still goes ahead."""
     try:
-        mode = path.stat().st_mode & 0o7777 if path.exists() else 0o666 & ~_UMASK
+        mode = path.stat().st_mode & 0o777 if path.exists() else 0o666 & ~_UMASK
         os.chmod(tmp, mode)
     except OSError:
         pass

@@ -67,6 +67,7 @@ class Scene:
         return validate(dataclasses.replace(self, **_coerce_all(overrides)))
 
 
+EPISODE_STEPS_MAX = 10**8
 _SPEC = {  # key: (type, lo, hi, lo_open, allow_inf)
     "R": (float, 0.0, 1.0, True, False),
     "E_star": (float, 0.0, 1e13, True, False),
@@ -84,7 +85,7 @@ _SPEC = {  # key: (type, lo, hi, lo_open, allow_inf)
     "ticks_per_period": (int, 2, 10000, False, False),
     "sub_steps": (int, 1, 100000, False, False),
     "resolution": (float, 1.0, 4096.0, False, False),
-    "episode_steps": (int, 1, 10**8, False, False),
+    "episode_steps": (int, 1, EPISODE_STEPS_MAX, False, False),
     "target_min": (float, 0.0, 1.0, False, False),
     "target_max": (float, 0.0, 1.0, True, False),
     "target_both_signs": (bool, None, None, False, False),

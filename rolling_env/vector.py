@@ -78,6 +78,8 @@ class BatchCore:
         """Env i gets seed + i (Gymnasium's convention); None draws fresh entropy.  A sequence
         of num_envs seeds (int or None each) seeds env i with seed[i] (None: left as is).
         Seeds are non-negative integers (numpy integers included); anything else raises."""
+        if isinstance(seed, np.ndarray) and seed.ndim == 0:
+            seed = seed.item()
         if isinstance(seed, (list, tuple, np.ndarray)):
             if len(seed) != self.num_envs:
                 raise ValueError(f"seed must be an int, None or a sequence of num_envs = "
@@ -261,6 +263,8 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
         if not hasattr(self.core, attr_name):
             raise AttributeError(f"RollingDriveVecEnv has no attribute {attr_name!r}")
         idx = list(self._get_indices(indices))
+        if attr_name == "max_episode_steps":
+            value = check_time_limit(value, self.core.scene)
         if self._per_env(attr_name):
             target = getattr(self.core, attr_name)
             if isinstance(target, list):

@@ -153,6 +153,16 @@ def test_atomic_write_gives_the_mode_of_a_plain_open(tmp_path):
         assert plain.stat().st_mode & 0o777 == kept and plain.read_text() == "y"
 
 
+def test_atomic_write_applies_the_umask(tmp_path, monkeypatch):
+    """A new file gets 0666 less the process umask (read once at import), whatever it is."""
+    import rolling_env.io as rio
+    for mask in (0o022, 0o027, 0o077):
+        monkeypatch.setattr(rio, "_UMASK", mask)
+        f = tmp_path / f"new{mask:o}.txt"
+        atomic_write(f, lambda p: Path(p).write_text("x"))
+        assert f.stat().st_mode & 0o777 == 0o666 & ~mask, oct(f.stat().st_mode)
+
+
 def _train(tmp_path, *extra, timesteps=512, scene="default", n_envs=2):
     cmd = [sys.executable, "-m", "agents.train", "--algo", "ppo", "--scene", scene,
            "--seed", "3", "--n-timesteps", str(timesteps), "--n-envs", str(n_envs),
@@ -255,6 +265,37 @@ def test_train_bad_scene_leaves_no_run_folder(tmp_path, capsys):
     assert not (tmp_path / "run").exists(), "config.yml written before the scene was checked"
 
 
+@pytest.mark.filterwarnings("ignore:You have specified a mini-batch size")
+@pytest.mark.parametrize("field, value", [("batch_size", 0), ("learning_rate", "abc"),
+                                          ("policy_kwargs", "dict(net_arch=[64"),
+                                          ("n_steps", 2.5), ("normalize", "dict(foo=1)")])
+def test_train_bad_hyperparameters_are_usage_errors(field, value, tmp_path, capsys):
+    """Hyper-parameters that SB3 rejects (by assert, TypeError or a syntax error in a kwargs
+    string) are one line and exit 2 with no run folder, like a bad scene."""
+    from agents.train import main as train_main
+    conf = yaml.safe_load((REPO / "configs/hyperparams/ppo.yml").read_text())
+    conf["default"][field] = value
+    path = tmp_path / "ppo.yml"
+    path.write_text(yaml.safe_dump(conf))
+    assert train_main(["--algo", "ppo", "--conf", str(path), "--run-dir", str(tmp_path / "run"),
+                       "--n-timesteps", "64", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("python -m agents.train: error:") and err.count("\n") == 1, err
+    assert not (tmp_path / "run").exists()
+    assert train_main(["--algo", "ppo", "--conf", str(tmp_path / "missing.yml"),
+                       "--run-dir", str(tmp_path / "run")]) == 2
+    assert "missing.yml" in capsys.readouterr().err
+    del conf["default"]["n_timesteps"]
+    path.write_text(yaml.safe_dump({"default": conf["default"]}))
+    assert train_main(["--algo", "ppo", "--conf", str(path),
+                       "--run-dir", str(tmp_path / "run")]) == 2
+    assert "'n_timesteps' missing" in capsys.readouterr().err
+    path.write_text(yaml.safe_dump({"other": conf["default"]}))
+    assert train_main(["--algo", "ppo", "--conf", str(path),
+                       "--run-dir", str(tmp_path / "run")]) == 2
+    assert "needs an entry for scene 'default'" in capsys.readouterr().err
+
+
 def test_train_lets_an_error_while_learning_propagate(tmp_path, monkeypatch):
     """Only a usage error (scene, hyper-parameter, argument) becomes a one-line exit 2; a
     ValueError raised while learning keeps its traceback."""
@@ -316,7 +357,7 @@ def test_baseline_rejects_a_scene_too_slow_for_eq32():
     with pytest.raises(ValueError, match="stroke_roll"):
         Eq32OpenLoop.from_env(rolling_env.make("default", stroke_roll=1e-5))
     for kw, name in ((dict(w_pref=1.9), "w_pref"), (dict(slip_margin=0.0), "slip_margin"),
-                     (dict(delta_pref=1.5), "delta_pref")):
+                     (dict(delta_pref=1.5), "delta_pref"), (dict(delta_pref=1.0), "delta_pref")):
         with pytest.raises(ValueError, match=name):
             Eq32Feedback.from_env(rolling_env.make("default"), **kw)
 

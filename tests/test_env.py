@@ -128,10 +128,11 @@ def test_time_limit_longer_than_the_episode_is_rejected():
                      max_episode_steps=1000)
 
 
-@pytest.mark.parametrize("bad", [0, -3, 2.5, math.inf, math.nan, True, "100", np.bool_(True)])
+@pytest.mark.parametrize("bad", [0, -3, 2.5, math.inf, math.nan, True, "100", np.bool_(True),
+                                 1e20])
 def test_bad_time_limits_are_rejected_without_the_lengthen_hint(bad):
-    """Only a too-long limit suggests episode_steps; the rest get the range (inf was an
-    OverflowError, True was accepted as 1)."""
+    """Only a too-long limit that episode_steps can take (<= 1e8) suggests it; the rest get
+    the range (inf was an OverflowError, True was accepted as 1)."""
     with pytest.raises(ValueError, match=r"max_episode_steps must be an integer in \[1, 512\]"
                        r"[^;]*got") as e:
         rolling_env.make("default", max_episode_steps=bad)

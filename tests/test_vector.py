@@ -186,6 +186,12 @@ def test_seeds_are_checked_integers():
     for bad, name in ((1.5, "seed"), (-1, "seed"), (True, "seed"), ([3, 2.5], r"seed\[1\]")):
         with pytest.raises(ValueError, match=f"{name} must be a non-negative integer"):
             venv.reset(seed=bad)
+    c, _ = venv.reset(seed=np.array(7))  # a 0-d array is the integer it holds
+    np.testing.assert_array_equal(c, a)
     sb3_env = RollingDriveVecEnv(2)
     sb3_env.seed(np.int64(7))
     np.testing.assert_array_equal(sb3_env.reset(), a)
+    with pytest.raises(ValueError, match=r"max_episode_steps must be an integer in \[1, 512\]"):
+        sb3_env.set_attr("max_episode_steps", 10**9)
+    sb3_env.set_attr("max_episode_steps", 100)
+    assert sb3_env.core.max_episode_steps == 100
