@@ -332,15 +332,15 @@ def _solve_bracketed(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st):
     v_lo = s0 - s_hi
     v_hi = s0 - s_lo
     # g at the bracket's ends; beyond them T is constant
-    g_lo, T_lo, Ta, dT = _g_eval(A, B, L, i0, i1, s0 - v_lo, v_lo, v0, mass, F, dt, st)
-    if _converged(g_lo, mass, v_lo, v0, dt, Ta + dT * (abs(s0) + abs(v_lo)), F):
+    g_lo, T_lo, sc, _d = _g_eval(A, B, L, i0, i1, s0, v_lo, v0, mass, F, dt, st)
+    if _converged(g_lo, mass, v_lo, v0, dt, sc, F):
         return v_lo
     if g_lo >= 0.0:
         if mass > 0.0:
             return v0 + dt * (T_lo + F) / mass
         return v_lo  # massless and every cell saturated: sliding (flagged by the caller)
-    g_hi, T_hi, Ta, dT = _g_eval(A, B, L, i0, i1, s0 - v_hi, v_hi, v0, mass, F, dt, st)
-    if _converged(g_hi, mass, v_hi, v0, dt, Ta + dT * (abs(s0) + abs(v_hi)), F):
+    g_hi, T_hi, sc, _d = _g_eval(A, B, L, i0, i1, s0, v_hi, v0, mass, F, dt, st)
+    if _converged(g_hi, mass, v_hi, v0, dt, sc, F):
         return v_hi
     if g_hi <= 0.0:
         if mass > 0.0:
@@ -348,10 +348,8 @@ def _solve_bracketed(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st):
         return v_hi
     vv = min(max(vv, v_lo), v_hi)
     for _it in range(200):
-        s = s0 - vv
-        g, _t, Ta, dT = _g_eval(A, B, L, i0, i1, s, vv, v0, mass, F, dt, st)
-        # round-off of g: its terms, and the slope times the round-off of s = s0 - v
-        if _converged(g, mass, vv, v0, dt, Ta + dT * (abs(s0) + abs(vv)), F):
+        g, _t, sc, dT = _g_eval(A, B, L, i0, i1, s0, vv, v0, mass, F, dt, st)
+        if _converged(g, mass, vv, v0, dt, sc, F):
             break
         if g > 0.0:
             v_hi = vv
@@ -368,9 +366,12 @@ def _solve_bracketed(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st):
 
 
 @njit(cache=True, inline="always")
-def _g_eval(A, B, L, i0, i1, s, vv, v0, mass, F, dt, st):
-    """g(vv) of ``_solve_bracketed`` at s = s0 - vv: returns (g, T, sum |U_i|, dT/ds)."""
+def _g_eval(A, B, L, i0, i1, s0, vv, v0, mass, F, dt, st):
+    """g(vv) of ``_solve_bracketed``: returns (g, T, scale, dT/ds), ``scale`` the size of the
+    force terms whose round-off g carries: sum |U_i| and the slope times the round-off of
+    s = s0 - vv (for ``_converged``)."""
     st[ST_ITER] += 1.0
+    s = s0 - vv
     Tt = 0.0
     Ta = 0.0
     dT = 0.0
@@ -379,7 +380,7 @@ def _g_eval(A, B, L, i0, i1, s, vv, v0, mass, F, dt, st):
         dT += dU
         Tt += Ut
         Ta += abs(Ut)
-    return mass * (vv - v0) - dt * (Tt + F), Tt, Ta, dT
+    return mass * (vv - v0) - dt * (Tt + F), Tt, Ta + dT * (abs(s0) + abs(vv)), dT
 
 
 @njit(cache=True, inline="always")
