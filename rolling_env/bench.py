@@ -11,7 +11,6 @@
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import subprocess
@@ -412,7 +411,3 @@ def report(res) -> str:
 def _parallel_min():
     from .vector import PARALLEL_MIN_ENVS
     return PARALLEL_MIN_ENVS
-
-
-def main_json(res) -> str:
-    return json.dumps(res, default=float)

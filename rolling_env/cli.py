@@ -47,19 +47,33 @@ def positive_int(name, lo=1, hi=10**9):
 
 
 def emit(result: dict, as_json: bool, human: str) -> None:
-    """Print one JSON object on stdout, or a human summary."""
+    """Print one JSON object on stdout (strict JSON: a non-finite number is written as the
+    string "inf", "-inf" or "nan", which JSON has no number for), or a human summary."""
     if as_json:
-        print(json.dumps(result, default=_json_default))
+        print(json.dumps(_jsonable(result), allow_nan=False))
     else:
         print(human)
 
 
-def _json_default(o):
+def _jsonable(o):
+    """``o`` with numpy values as Python ones, tuples as lists, non-finite floats as strings
+    and anything else JSON has no type for as its ``str``."""
     import numpy as np
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
+    if isinstance(o, dict):
+        return {str(k): _jsonable(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple, np.ndarray)):
+        return [_jsonable(v) for v in (o.tolist() if isinstance(o, np.ndarray) else o)]
+    if isinstance(o, (bool, np.bool_)):
+        return bool(o)
+    if isinstance(o, (int, np.integer)):
+        return int(o)
+    if isinstance(o, (float, np.floating)):
+        x = float(o)
+        if math.isfinite(x):
+            return x
+        return "nan" if math.isnan(x) else ("inf" if x > 0 else "-inf")
+    if o is None or isinstance(o, str):
+        return o
     return str(o)
 
 

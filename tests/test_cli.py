@@ -11,9 +11,22 @@ from rolling_env import analytic
 from rolling_env.cli import main
 
 
+def _strict(token):
+    raise AssertionError(f"{token} is not JSON (a strict parser such as jq or JSON.parse rejects it)")
+
+
 def _json(capsys, *argv):
+    """The command's stdout parsed as strict JSON (no NaN / Infinity tokens)."""
     assert main(list(argv)) == 0
-    return json.loads(capsys.readouterr().out)
+    return json.loads(capsys.readouterr().out, parse_constant=_strict)
+
+
+def test_json_writes_non_finite_numbers_as_strings(capsys):
+    r = _json(capsys, "simulate", "--delta", "0.7", "--eps", "0.1", "--w", "2.5",
+              "--omega-n-ratio", "inf", "--periods", "2", "--resolution", "16", "--json")
+    assert r["mu"] == "inf" and r["omega_n_ratio"] == "inf", (
+        f"infinite friction / massless runner should read 'inf', got {r['mu']!r}, "
+        f"{r['omega_n_ratio']!r}")
 
 
 def test_working_point_json(capsys):
