@@ -68,31 +68,35 @@ class Scene:
 
 
 EPISODE_STEPS_MAX = 10**8
-_SPEC = {  # key: (type, lo, hi, lo_open, allow_inf)
-    "R": (float, 0.0, 1.0, True, False),
-    "E_star": (float, 0.0, 1e13, True, False),
-    "G_star": (float, 0.0, 1e13, True, False),
-    "mu": (float, 0.0, _INF, True, True),
+_SPEC = {  # key: (type, lo, hi, lo_open, allow_inf); physical ranges, wide but bounded so
+    # that every derived scale (contact radius, forces, masses, rates in kernel units) stays
+    # a normal float: a scene either builds or is rejected here, never NaN or a crash later
+    "R": (float, 1e-9, 1.0, False, False),
+    "E_star": (float, 1e3, 1e13, False, False),
+    "G_star": (float, 1e3, 1e13, False, False),
+    "mu": (float, 1e-9, _INF, False, True),
     "runner_mass": (float, 0.0, 1e6, False, False),
     "F_ext": (float, -1e6, 1e6, False, False),
     "N_min": (float, 0.0, 1e6, False, False),
-    "N_max": (float, 0.0, 1e6, True, False),
-    "omega_R_max": (float, 0.0, 1e3, True, False),
-    "creep_max": (float, 0.0, 2.0, True, False),
-    "stroke_roll": (float, 0.0, 1.0, True, False),
-    "stroke_translate": (float, 0.0, 1.0, True, False),
-    "period": (float, 0.0, 1e3, True, False),
+    "N_max": (float, 1e-12, 1e6, False, False),
+    "omega_R_max": (float, 1e-9, 1e3, False, False),
+    "creep_max": (float, 1e-9, 2.0, False, False),
+    "stroke_roll": (float, 1e-12, 1.0, False, False),
+    "stroke_translate": (float, 1e-12, 1.0, False, False),
+    "period": (float, 1e-12, 1e3, False, False),
     "ticks_per_period": (int, 2, 10000, False, False),
     "sub_steps": (int, 1, 100000, False, False),
     "resolution": (float, 1.0, 4096.0, False, False),
     "episode_steps": (int, 1, EPISODE_STEPS_MAX, False, False),
     "target_min": (float, 0.0, 1.0, False, False),
-    "target_max": (float, 0.0, 1.0, True, False),
+    "target_max": (float, 1e-15, 1.0, False, False),
     "target_both_signs": (bool, None, None, False, False),
-    "tolerance": (float, 0.0, 1.0, True, False),
+    "tolerance": (float, 1e-15, 1.0, False, False),
     "w_track": (float, 0.0, 1e6, False, False),
     "w_wear": (float, 0.0, 1e12, False, False),
 }
+E_OVER_G_RANGE = (0.01, 100.0)  # E*/G*: about 1-2 for real materials (isotropic, 0 <= nu <= 0.5)
+
 _FIELDS = [f.name for f in dataclasses.fields(Scene)]
 
 
@@ -100,6 +104,11 @@ def _coerce(key, value):
     if key in ("name", "description"):
         if not isinstance(value, str):
             raise ValueError(f"scene key '{key}' must be a string, got {type(value).__name__}")
+        if key == "name" and (not value or value.startswith(".") or len(value) > 100
+                              or any(ch in value for ch in "/\\\0")):
+            # output files are named after the scene: it must stay one file name
+            raise ValueError("scene key 'name' must be a file name: 1 to 100 characters, no "
+                             f"'/', '\\' or NUL, not starting with '.', got {value!r}")
         return value
     if key not in _SPEC:
         raise ValueError(f"unknown scene key '{key}'; allowed keys: {', '.join(_FIELDS)}")
@@ -141,6 +150,10 @@ def validate(scene: Scene) -> Scene:
     if s.target_min > s.target_max:
         raise ValueError(f"scene key 'target_min' must be <= target_max = {s.target_max}, "
                          f"got {s.target_min}")
+    lo, hi = E_OVER_G_RANGE
+    if not lo <= s.E_star / s.G_star <= hi:
+        raise ValueError(f"scene keys 'E_star' and 'G_star' must have a ratio E_star/G_star in "
+                         f"[{lo:g}, {hi:g}], got {s.E_star / s.G_star:.3g}")
     if s.runner_mass == 0.0 and s.F_ext != 0.0:
         raise ValueError("scene key 'F_ext' must be 0 when runner_mass is 0 (a loaded massless "
                          "runner has no equilibrium once the contact slides)")
@@ -172,8 +185,7 @@ def load_scene(scene: str | os.PathLike | dict | Scene = "default", **overrides)
                                  f"{', '.join(list_scenes())} (or give a path to a .yaml file)")
         if not path.exists():
             raise ValueError(f"scene file {str(path)!r} does not exist")
-        with open(path) as f:
-            raw = yaml.safe_load(f)
+        raw = _read_yaml(path)
         if not isinstance(raw, dict):
             raise ValueError(f"scene file {str(path)!r} must hold a mapping of keys to values")
         raw.setdefault("name", path.stem)
@@ -184,6 +196,32 @@ def load_scene(scene: str | os.PathLike | dict | Scene = "default", **overrides)
     vals = _coerce_all(raw)
     vals.update(_coerce_all(overrides))
     return validate(Scene(**vals))
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """YAML's safe loader, except that a key given twice in one mapping is an error (plain
+    YAML keeps the last value silently, hiding an edit that did not take)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {key!r}", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def _read_yaml(path: Path):
+    """The YAML document in ``path``; a syntax error or a duplicate key is a ValueError naming
+    the file and the line."""
+    try:
+        with open(path) as f:
+            return yaml.load(f, Loader=_UniqueKeyLoader)
+    except yaml.YAMLError as e:
+        msg = " ".join(str(e).split())
+        raise ValueError(f"scene file {str(path)!r} is not valid YAML: {msg}") from None
 
 
 def list_scenes() -> list[str]:

@@ -190,6 +190,52 @@ def test_random_fuzz_stays_finite(scene):
     assert np.all(np.isfinite(drv.U)) and np.all(np.isfinite(drv.st))
 
 
+def test_scene_range_corners_build_and_stay_finite():
+    """Scenes drawn at the ends of the allowed ranges (a few keys at a time): each either is
+    rejected with a ValueError at construction or runs with finite observations, rewards and
+    info values (in-range values such as period = 1e-200 s once crashed deep inside)."""
+    from rolling_env.scenes import _SPEC
+    keys = sorted(k for k, v in _SPEC.items() if v[0] is float)
+    rng = np.random.default_rng(11)
+    built = 0
+    for trial in range(60):
+        ov = {}
+        for k in rng.choice(keys, size=rng.integers(1, 6), replace=False):
+            _, lo, hi, _, _ = _SPEC[str(k)]
+            hi = min(hi, 1e6)
+            pick = rng.integers(0, 3)
+            ov[str(k)] = (lo if pick == 0 else hi if pick == 1 else
+                          float(math.exp(rng.uniform(math.log(max(lo, 1e-300)), math.log(hi)))))
+        ov["sub_steps"] = int(rng.choice([1, 2, 8]))
+        ov["resolution"] = float(rng.choice([1.0, 16.0]))
+        try:
+            env = gym.make("RollingDrive-v0", **ov)
+        except ValueError:
+            continue
+        built += 1
+        env.reset(seed=trial)
+        for t in range(20):
+            a = rng.choice([-1.0, 0.0, 1.0], 3) if t % 2 else rng.uniform(-1, 1, 3)
+            obs, r, _, _, info = env.step(a.astype(np.float32))
+            vals = [r] + [v for v in info.values() if isinstance(v, float)]
+            assert np.all(np.isfinite(obs)) and all(math.isfinite(v) for v in vals), (
+                f"non-finite output at step {t} with overrides {ov}")
+    assert built >= 20, f"only {built} of 60 corner scenes were valid: the sample tests little"
+
+
+@pytest.mark.parametrize("key,value", [("period", 1e-200), ("G_star", 1e-300), ("N_max", 1e-320),
+                                       ("omega_R_max", 5e-324), ("mu", 5e-324),
+                                       ("target_max", 5e-324), ("R", 1e-300)])
+def test_scene_values_whose_scales_underflow_are_rejected(key, value):
+    with pytest.raises(ValueError, match=f"scene key '{key}' must be in"):
+        gym.make("RollingDrive-v0", **{key: value})
+
+
+def test_scene_elastic_constants_ratio_checked():
+    with pytest.raises(ValueError, match=r"E_star/G_star in \[0.01, 100\]"):
+        gym.make("RollingDrive-v0", E_star=1e13, G_star=1e3)
+
+
 def test_stroke_saturation_reported():
     env = gym.make("RollingDrive-v0").unwrapped
     env.reset(seed=0)
@@ -225,12 +271,32 @@ def _raw(name="default"):
     (lambda d: d.update(sub_steps=2.5), "'sub_steps' must be an integer"),
     (lambda d: d.update(target_both_signs="yes"), "'target_both_signs' must be true or false"),
     (lambda d: d.update(N_min=2.0), "'N_min' must be < N_max"),
+    (lambda d: d.update(name="../../x"), "'name' must be a file name"),
+    (lambda d: d.update(name=""), "'name' must be a file name"),
 ])
 def test_scene_validation(mutate, match):
     d = _raw()
     mutate(d)
     with pytest.raises(ValueError, match=match):
         load_scene(d)
+
+
+def test_scene_file_errors_name_the_file(tmp_path):
+    """A YAML syntax error or a key given twice is a ValueError naming the file (not a yaml
+    traceback, and not the last duplicate silently winning)."""
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("a: [1\n")
+    with pytest.raises(ValueError, match="broken.yaml' is not valid YAML"):
+        load_scene(broken)
+    text = (SCENE_DIR / "default.yaml").read_text()
+    dup = tmp_path / "dup.yaml"
+    dup.write_text(text + "mu: 0.5\n")
+    with pytest.raises(ValueError, match="duplicate key 'mu'"):
+        load_scene(dup)
+    ok = tmp_path / "ok.yaml"
+    ok.write_text(text)
+    assert load_scene(ok) == load_scene("default").replace(name="default"), (
+        "a copy of a shipped scene must load unchanged")
 
 
 def test_overrides_validated_and_applied():
