@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 _TOL = 1e-12  # rounding slack when a target ratio sits on the edge of its reachable range
+W_MAX = 1e15  # largest rolling amplitude w = W/a1 taken (far beyond any drive; bounded so that
+# the impulse coefficients ~ w stay finite)
 
 
 # ----------------------------------------------------------------------------- validation
@@ -45,6 +47,18 @@ def _out(a):
     return float(a) if np.ndim(a) == 0 else a
 
 
+def _w(w, lo=0.0, lo_open=True):
+    """The rolling amplitude w = W/a1, checked to be in (0, W_MAX] (or [lo, W_MAX])."""
+    return _arr("w", w, lo, W_MAX, lo_open=lo_open)
+
+
+def _finite(name, a):
+    """A result that overflowed for finite input is a ValueError, not an inf."""
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} overflows the float range for this input (inputs too large)")
+    return _out(a)
+
+
 # ----------------------------------------------------------------------------- materials
 def effective_moduli(E1, nu1, E2, nu2):
     """Eq. 1: (E_star, G_star) [Pa] of two elastic bodies, Young moduli E1, E2 > 0 [Pa] and
@@ -72,14 +86,18 @@ def hertz_indentation(N, R, E_star):
     E_star > 0 [Pa]."""
     N = _arr("N", N, 0)
     R, E_star = _pos("R", R), _pos("E_star", E_star)
-    return _out((3 * N / (4 * E_star * np.sqrt(R))) ** (2 / 3))
+    with np.errstate(over="ignore"):
+        d = (3 * N / (4 * E_star * np.sqrt(R))) ** (2 / 3)
+    return _finite("the indentation d", d)
 
 
 def hertz_force(d, R, E_star):
     """Normal force N [N] = 4/3 E* sqrt(R) d^(3/2); d >= 0 [m], R > 0 [m], E_star > 0 [Pa]."""
     d = _arr("d", d, 0)
     R, E_star = _pos("R", R), _pos("E_star", E_star)
-    return _out(4 / 3 * E_star * np.sqrt(R) * d ** 1.5)
+    with np.errstate(over="ignore"):
+        N = 4 / 3 * E_star * np.sqrt(R) * d ** 1.5
+    return _finite("the normal force N", N)
 
 
 def contact_radius(d, R):
@@ -119,7 +137,7 @@ def eq29(delta, eps):
 
 def impulse_coefficients(delta, w):
     """(P, Q) of the period impulse I = (1 - eps) P - V Q of the runner force, V = v*/(omega R),
-    in units of G* a1^2 * (a1 / (omega R)) [N s]; delta in [0, 1], w >= 1 + sqrt(delta).
+    in units of G* a1^2 * (a1 / (omega R)) [N s]; delta in [0, 1], 1 + sqrt(delta) <= w <= W_MAX.
 
     Derivation (physics.md kinematics, lengths in a1, times in a1/(omega R)): every spring in
     contact creeps at s1 = (1 - eps) - V in the forth step and s2 = -(1 - eps) - V in the back
@@ -136,7 +154,7 @@ def impulse_coefficients(delta, w):
     tests/test_physics.py.  Below w = 1 + sqrt(delta) some springs never release and there is
     no steady working point: ValueError.
     """
-    delta, w = _arr("delta", delta, 0, 1), _pos("w", w)
+    delta, w = _arr("delta", delta, 0, 1), _w(w)
     low = w < 1 + np.sqrt(delta)
     if np.any(low):
         raise ValueError(f"w must be >= 1 + sqrt(delta), got w = {_first(w, low)!r} at "
@@ -152,14 +170,15 @@ def eq32(delta, eps, w):
     """Eq. 32: working point v*/(omega R) with the transition between the steps,
     (1 - eps) [4/3 (1 - delta^1.5) - 2 w (1 - delta)] / [4/3 - 4 delta - 2 w (1 + delta)];
     delta in [0, 1] (delta = 0 gives 1 - eps, delta = 1 gives 0), eps finite (eps > 1 is
-    reverse creep), w >= 2 only: use ``working_point_ratio`` for 1 + sqrt(delta) <= w < 2."""
-    delta, eps, w = _arr("delta", delta, 0, 1), _arr("eps", eps), _pos("w", w)
+    reverse creep), 2 <= w <= W_MAX only: use ``working_point_ratio`` for
+    1 + sqrt(delta) <= w < 2."""
+    delta, eps, w = _arr("delta", delta, 0, 1), _arr("eps", eps), _w(w)
     if np.any(w < 2):
         raise ValueError(f"w must be >= 2 for Eq. 32 (the paper's assumption), got "
                          f"{_first(w, w < 2)!r}; working_point_ratio covers "
                          "1 + sqrt(delta) <= w < 2")
-    num = 4 / 3 * (1 - delta ** 1.5) - 2 * w * (1 - delta)
-    den = 4 / 3 - 4 * delta - 2 * w * (1 + delta)
+    num = 4 / 3 * (1 - delta ** 1.5) / w - 2 * (1 - delta)  # both over w: no overflow
+    den = (4 / 3 - 4 * delta) / w - 2 * (1 + delta)
     return _out((1 - eps) * num / den)
 
 
@@ -170,23 +189,25 @@ def working_point_ratio(delta, eps, w):
     tests/test_physics.py)."""
     eps = _arr("eps", eps)
     P, Q = impulse_coefficients(delta, w)
-    return _out((1 - eps) * np.asarray(P) / np.asarray(Q))
+    w = np.asarray(w, dtype=np.float64)
+    return _out((1 - eps) * (np.asarray(P) / w) / (np.asarray(Q) / w))
 
 
 def _cubic_root_b(r, w):
     """b = sqrt(delta) in [0, 1] with Eq. 32 = r (1 - eps), r in [0, 1], w >= 2.
 
-    num(b) = r den(b) reads f(b) = -4/3 b^3 + c2 b^2 + c0 = 0 with c2 = 2w + 4r + 2wr and
-    c0 = (4/3 - 2w)(1 - r).  f(0) <= 0 <= f(1) = r (8/3 + 4w) and f'(b) = b (2 c2 - 4 b) > 0
-    on (0, 1] for w >= 2, so the root in [0, 1] is unique (Eq. 32 is monotone in delta)."""
-    c2, c0 = 2 * w + 4 * r + 2 * w * r, (4 / 3 - 2 * w) * (1 - r)
-    roots = np.roots([-4 / 3, c2, 0.0, c0])
+    num(b) = r den(b) reads -4/3 b^3 + C2 b^2 + C0 = 0 with C2 = 2w + 4r + 2wr and
+    C0 = (4/3 - 2w)(1 - r); f(0) <= 0 <= f(1) = r (8/3 + 4w) and f'(b) = b (2 C2 - 4 b) > 0
+    on (0, 1] for w >= 2, so the root in [0, 1] is unique (Eq. 32 is monotone in delta).
+    Solved with every coefficient divided by w (a large w would swamp the cubic term)."""
+    c3, c2, c0 = -4 / 3 / w, 2 + (4 * r) / w + 2 * r, (4 / 3 / w - 2) * (1 - r)
+    roots = np.roots([c3, c2, 0.0, c0])
     real = roots.real[np.abs(roots.imag) <= 1e-7 * (1 + np.abs(roots))]
     b = float(np.clip(np.max(real[real <= 1 + 1e-7], initial=0.0), 0.0, 1.0))
     for _ in range(2):  # Newton polish to full precision (the root is simple for r < 1)
-        fp = b * (2 * c2 - 4 * b)
+        fp = b * (2 * c2 + 3 * c3 * b)
         if fp > 0:
-            b = float(np.clip(b - (-4 / 3 * b ** 3 + c2 * b ** 2 + c0) / fp, 0.0, 1.0))
+            b = float(np.clip(b - (c3 * b ** 3 + c2 * b ** 2 + c0) / fp, 0.0, 1.0))
     return b
 
 
@@ -194,7 +215,7 @@ def invert_eq32_delta(ratio, eps, w):
     """delta in [0, 1] with eq32(delta, eps, w) = ratio (= v*/(omega R)), solved exactly as a
     cubic in b = sqrt(delta) (see ``_cubic_root_b``); eps finite and != 1, w >= 2.  ``ratio``
     must lie in the reachable range [0, 1 - eps] (for eps > 1: [1 - eps, 0])."""
-    ratio, eps, w = _arr("ratio", ratio), _arr("eps", eps), _arr("w", w, 2, np.inf)
+    ratio, eps, w = _arr("ratio", ratio), _arr("eps", eps), _w(w, 2, False)
     if np.any(eps == 1):
         raise ValueError("eps must differ from 1 (no creep: every delta gives v* = 0)")
     r = ratio / (1 - eps)

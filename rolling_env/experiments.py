@@ -21,9 +21,13 @@ from scipy.optimize import brentq
 from . import analytic
 from .excitation import SquareWave
 from .model import Drive, DriveParams
+from .scenes import _SPEC as SCENE_RANGES
 from .validation import check_range
 
 DEFAULT_RESOLUTION = 64.0  # springs per a1; chosen from results/work_precision.csv (README)
+
+
+A_OVER_R_RANGE = (1e-6, 0.5)
 
 
 @dataclass(frozen=True)
@@ -38,7 +42,12 @@ class Geometry:
     tau: float = 1e-3
 
     def __post_init__(self):
-        check_range("a_over_r", self.a_over_r, 0.0, 0.5, lo_open=True)
+        # the scenes' physical ranges for R, E* and the period; a1/R from 1e-6 (below, the
+        # energy unit 2 G* a1^3 underflows for small spheres) to 0.5 (small-strain contact)
+        for name, key in (("R", "R"), ("E_star", "E_star"), ("tau", "period")):
+            _, lo, hi, _, _ = SCENE_RANGES[key]
+            check_range(name, getattr(self, name), lo, hi)
+        check_range("a_over_r", self.a_over_r, A_OVER_R_RANGE[0], A_OVER_R_RANGE[1])
         check_range("g_over_e", self.g_over_e, 0.0, 10.0, lo_open=True)
 
     @property

@@ -8,6 +8,7 @@ omega R and v).  The compiled kernel is chosen once, from the feature set of the
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -49,12 +50,16 @@ class DriveParams:
     F_ext: float = 0.0
 
     def __post_init__(self):
-        check_range("R", self.R, 0.0, _INF, lo_open=True, hi_open=True)
-        check_range("E_star", self.E_star, 0.0, _INF, lo_open=True, hi_open=True)
-        check_range("G_star", self.G_star, 0.0, _INF, lo_open=True, hi_open=True)
-        check_range("mu", self.mu, 0.0, _INF, allow_inf=True)
-        check_range("m", self.m, 0.0, _INF, allow_inf=True)
-        check_range("F_ext", self.F_ext, -_INF, _INF, lo_open=True, hi_open=True)
+        checked = {
+            "R": check_range("R", self.R, 0.0, _INF, lo_open=True, hi_open=True),
+            "E_star": check_range("E_star", self.E_star, 0.0, _INF, lo_open=True, hi_open=True),
+            "G_star": check_range("G_star", self.G_star, 0.0, _INF, lo_open=True, hi_open=True),
+            "mu": check_range("mu", self.mu, 0.0, _INF, allow_inf=True),
+            "m": check_range("m", self.m, 0.0, _INF, allow_inf=True),
+            "F_ext": check_range("F_ext", self.F_ext, -_INF, _INF, lo_open=True, hi_open=True),
+        }
+        for name, value in checked.items():  # store the checked floats (not "1e-3" strings)
+            object.__setattr__(self, name, value)
         if self.m == 0.0 and self.F_ext != 0.0:
             raise ValueError("F_ext must be 0 for a massless runner (m = 0): a load on a "
                              "massless runner has no equilibrium once the contact slides")
@@ -118,6 +123,9 @@ class Drive:
         check_range("resolution", resolution, 0.5, 1e5)
         check_range("a_max", a_max, 0.0, _INF, lo_open=True, hi_open=True)
         check_range("t_ref", t_ref, 0.0, _INF, lo_open=True, hi_open=True)
+        if not isinstance(params, DriveParams):
+            raise ValueError(f"params must be a DriveParams, got {type(params).__name__}")
+        stroke = _check_stroke(stroke)
         self.params = params
         self.L0 = float(a_ref)
         self.t0 = float(t_ref)
@@ -130,7 +138,9 @@ class Drive:
                          grid_offset)
         n = self.grid.n
         if n > 20_000_000:
-            raise ValueError(f"the spring row would need {n} cells: lower resolution or stroke")
+            raise ValueError(f"the spring row would need {n} cells (> 2e7) to cover the stroke "
+                             f"{stroke[1] - stroke[0]:.3g} m at {resolution:g} cells per a_ref: "
+                             "lower the resolution or the stroke (rolling amplitude)")
         self._p = np.array([params.R / self.L0, params.E_star / params.G_star,
                             self.grid.x_lo, self.grid.dx])
         finite_mu, free, load = params.features
@@ -152,7 +162,11 @@ class Drive:
 
     # ------------------------------------------------------------------ state
     def reset(self, c0: float = 0.0, vstar0: float = 0.0) -> None:
-        """Release every spring, patch centre at c0 [m], runner at rest or at vstar0 [m/s]."""
+        """Release every spring, patch centre at c0 [m] (inside the stroke the grid covers),
+        runner at rest or at vstar0 [m/s] (finite)."""
+        c_lo, c_hi = self.grid.c_min * self.L0, self.grid.c_max * self.L0
+        check_range("c0", c0, min(c_lo, 0.0), max(c_hi, 0.0))
+        check_range("vstar0", vstar0, -_INF, _INF, lo_open=True, hi_open=True)
         self.U[:] = 0.0
         self.st[:] = 0.0
         self.st[K.ST_C] = c0 / self.L0
@@ -176,8 +190,7 @@ class Drive:
         Returns a dict of per-tick arrays in SI (see ``_kernel.OUT_*``).
         """
         check_range("dt_tick", dt_tick, 0.0, _INF, lo_open=True, hi_open=True)
-        if int(n_sub) != n_sub or n_sub < 1:
-            raise ValueError(f"n_sub must be an integer >= 1, got {n_sub}")
+        n_sub = check_n_sub(n_sub)
         u = _as_ticks("omega_R", omega_R)
         k = u.shape[0]
         vv = _as_ticks("v", v, k)
@@ -305,6 +318,31 @@ class Drive:
         else:
             slip = np.zeros(g.n, bool)
         return x * self.L0, uT * self.L0, uN * self.L0, slip
+
+
+N_SUB_MAX = 10**9
+
+
+def check_n_sub(n_sub) -> int:
+    """Sub-steps per tick as an int in [1, N_SUB_MAX] (integral floats accepted)."""
+    ok = (not isinstance(n_sub, (bool, np.bool_)) and isinstance(n_sub, (numbers.Real))
+          and math.isfinite(n_sub) and n_sub == int(n_sub) and 1 <= n_sub <= N_SUB_MAX)
+    if not ok:
+        raise ValueError(f"n_sub must be an integer in [1, {N_SUB_MAX}], got {n_sub!r}")
+    return int(n_sub)
+
+
+def _check_stroke(stroke) -> tuple[float, float]:
+    """(c_min, c_max) [m]: two finite numbers, c_min <= c_max."""
+    try:
+        lo, hi = stroke
+    except (TypeError, ValueError):
+        raise ValueError(f"stroke must be a pair (c_min, c_max) in m, got {stroke!r}") from None
+    lo = check_range("stroke[0]", lo, -_INF, _INF, lo_open=True, hi_open=True)
+    hi = check_range("stroke[1]", hi, -_INF, _INF, lo_open=True, hi_open=True)
+    if not lo <= hi:
+        raise ValueError(f"stroke must satisfy c_min <= c_max, got ({lo}, {hi})")
+    return lo, hi
 
 
 def _as_ticks(name, x, k=None):

@@ -169,6 +169,18 @@ def test_invert_eq32_delta_vectorised_and_edges():
     assert abs(an.invert_eq32_delta(an.eq32(0.6, 1.5, 4.0), 1.5, 4.0) - 0.6) < 1e-10
 
 
+@pytest.mark.parametrize("w", [1e3, 1e8, 1e12, an.W_MAX])
+def test_eq32_and_inverse_at_large_w(w):
+    """Up to W_MAX: Eq. 32 tends to its w -> inf limit (1 - eps)(1 - delta)/(1 + delta) = Eq. 29
+    without overflow, and the inversion still recovers delta (1e-10; it once returned 0 for
+    w >= 1e25, where the cubic term vanished next to the w-sized ones)."""
+    for delta in (0.05, 0.5, 0.9):
+        v = an.eq32(delta, 0.1, w)
+        assert abs(v - an.eq29(delta, 0.1)) <= 2.0 / w, f"w={w}: {v} vs Eq. 29 {an.eq29(delta, 0.1)}"
+        assert abs(an.invert_eq32_delta(v, 0.1, w) - delta) < 1e-10, f"w={w}, delta={delta}"
+        assert an.working_point_ratio(delta, 0.1, w) == pytest.approx(v, rel=1e-13)
+
+
 @pytest.mark.parametrize("delta,eps,w", [c for c in GRID if c[0] < 1])
 def test_invert_eq32_eps_round_trip(delta, eps, w):
     """eq32 -> invert_eq32_eps recovers eps (delta < 1 only: at delta = 1 eps is free)."""
@@ -220,6 +232,11 @@ BAD = [
     (an.eq32, (0.5, math.inf, 2.5), "eps"),
     (an.eq32, (0.5, 0.1, 1.9), "working_point_ratio"),
     (an.eq32, (0.5, 0.1, -1.0), "w"),
+    (an.eq32, (0.5, 0.1, 1e308), "w"),
+    (an.working_point_ratio, (0.5, 0.1, math.inf), "w"),
+    (an.invert_eq32_delta, (0.05, 0.1, 1e25), "w"),
+    (an.hertz_indentation, (1e308, 1e-300, 1e-300), "indentation d overflows"),
+    (an.hertz_force, (1e300, 1e300, 1e300), "normal force N overflows"),
     (an.eq32, (np.array([0.5, np.nan]), 0.1, 2.5), "delta"),
     (an.eq29, (2.0, 0.1), "delta"),
     (an.working_point_ratio, (0.81, 0.1, 1.85), "w"),

@@ -262,6 +262,46 @@ def test_bad_dimensionless_inputs_rejected(args, name):
         ex.working_point(*args)
 
 
+def test_drive_params_store_checked_floats():
+    """A number given as a string is checked and stored as the float (it was stored as the
+    string, and the Drive failed later with a TypeError)."""
+    p = DriveParams("1e-3", "1e11", 8e10, mu="0.2")
+    assert type(p.R) is float and p.R == 1e-3 and p.mu == 0.2, f"{p}"
+
+
+@pytest.mark.parametrize("call,name", [
+    (lambda d: d.reset(vstar0=math.inf), "vstar0"),
+    (lambda d: d.reset(c0=math.nan), "c0"),
+    (lambda d: d.reset(c0=1.0), "c0"),
+    (lambda d: d.run(dt_tick=1e-6, n_sub=2**63, omega_R=0.0, v=0.0, N=0.1, vstar=0.0), "n_sub"),
+    (lambda d: d.run(dt_tick=1e-6, n_sub="2", omega_R=0.0, v=0.0, N=0.1, vstar=0.0), "n_sub"),
+    (lambda d: d.run(dt_tick=1e-6, n_sub=1.5, omega_R=0.0, v=0.0, N=0.1, vstar=0.0), "n_sub"),
+])
+def test_drive_state_and_step_arguments_checked(call, name):
+    """reset() and run() reject non-finite or out-of-stroke states and a sub-step count that
+    is not an integer in range, naming the argument (these once gave a meaningless v*, a
+    misleading grid error, an OverflowError or a message claiming '2' is not an integer)."""
+    with pytest.raises(ValueError, match=name):
+        call(_drive())
+
+
+@pytest.mark.parametrize("stroke,match", [((0.0, math.inf), r"stroke\[1\]"),
+                                          ((1e-5, 0.0, 1.0), "stroke must be a pair"),
+                                          ((1e-5, -1e-5), "c_min <= c_max")])
+def test_drive_stroke_checked(stroke, match):
+    with pytest.raises(ValueError, match=match):
+        _drive(stroke=stroke)
+
+
+def test_geometry_ranges():
+    """a1/R below 1e-6 made the energy unit 2 G* a1^3 underflow (NaN slip work); R, E* and tau
+    follow the scenes' physical ranges."""
+    for kw, name in ((dict(a_over_r=1e-160), "a_over_r"), (dict(R=1e-300), "R"),
+                     (dict(tau=0.0), "tau"), (dict(E_star=math.inf), "E_star")):
+        with pytest.raises(ValueError, match=name):
+            ex.Geometry(**kw)
+
+
 def test_nan_input_rejected_by_drive():
     drv = _drive()
     with pytest.raises(ValueError, match="omega_R"):

@@ -30,7 +30,7 @@ def register(sub):
                    f"[{ex.OMEGA_N_RATIO_RANGE[0]:g}, {ex.OMEGA_N_RATIO_RANGE[1]:g}]")
     p.add_argument("--mu", type=finite_float("mu", 0, math.inf, lo_open=True, allow_inf=True),
                    default=math.inf, help="friction coefficient (default inf: no slip)")
-    p.add_argument("--a-over-r", type=finite_float("a-over-r", 0, 0.5, lo_open=True),
+    p.add_argument("--a-over-r", type=finite_float("a-over-r", *ex.A_OVER_R_RANGE),
                    default=0.02, help="a1/R (matters with finite friction; default 0.02)")
     p.add_argument("--g-over-e", type=finite_float("g-over-e", 0, 10, lo_open=True),
                    default=ex.Geometry().g_over_e, help="G*/E* (default 0.824, nu = 0.3)")
