@@ -46,6 +46,29 @@ def positive_int(name, lo=1, hi=10**9):
     return conv
 
 
+def file_path(name):
+    """argparse type: a path for one output file (not an existing folder, not ending in '/')."""
+    def conv(text):
+        import os
+        if not text or text.endswith(("/", os.sep)) or os.path.isdir(text):
+            raise argparse.ArgumentTypeError(f"{name} must be a file path (the report), got the "
+                                             f"folder {text!r}")
+        return text
+    conv.__name__ = name
+    return conv
+
+
+def folder_path(name):
+    """argparse type: a folder for output files (an existing file is refused)."""
+    def conv(text):
+        import os
+        if not text or (os.path.exists(text) and not os.path.isdir(text)):
+            raise argparse.ArgumentTypeError(f"{name} must be a folder, got the file {text!r}")
+        return text
+    conv.__name__ = name
+    return conv
+
+
 def emit(result: dict, as_json: bool, human: str) -> None:
     """Print one JSON object on stdout (strict JSON: a non-finite number is written as the
     string "inf", "-inf" or "nan", which JSON has no number for), or a human summary."""

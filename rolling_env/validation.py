@@ -17,6 +17,8 @@ def check_range(name: str, value, lo: float, hi: float, *, lo_open: bool = False
     lb = "(" if lo_open else "["
     rb = ")" if hi_open else "]"
     rng = f"{lb}{_fmt(lo)}, {_fmt(hi)}{rb}"
+    if math.isinf(lo) and math.isinf(hi) and not allow_inf:
+        rng = "(-inf, inf) (a finite number)"
     if math.isnan(x):
         raise ValueError(f"{name} must be in {rng}, got NaN")
     if math.isinf(x) and x > 0 and allow_inf:

@@ -58,8 +58,20 @@ def test_mindlin_json(capsys):
       "--mu", "-1"], "mu"),
     (["mindlin", "--mu", "0.3", "--points", "1"], "points"),
     (["mindlin", "--mu", "1e300"], "mu"),
+    (["simulate", "--delta", "0.7", "--eps", "0.1", "--w", "2.5", "--omega-n-ratio", "1",
+      "--a-over-r", "1e-160"], "a-over-r must be in [1e-06, 0.5]"),
+    (["rollout", "--target", "nan"], "target must be in (-inf, inf) (a finite number)"),
+    (["rollout", "--controller", "zero", "--out", "{file}"], "out must be a folder"),
+    (["figures", "--out", "{file}"], "out must be a folder"),
+    (["stability", "--quick", "--out", "{dir}"], "out must be a file path"),
+    (["bench", "--quick", "--out", "{dir}/"], "out must be a file path"),
 ])
-def test_bad_arguments_exit_2_naming_the_parameter(argv, name, capsys):
+def test_bad_arguments_exit_2_naming_the_parameter(argv, name, tmp_path, capsys):
+    """Checked before any work: --out that names a folder where a report file is written
+    (it wrote a file named like the folder) or a file where a folder is, --target NaN, ..."""
+    f = tmp_path / "a_file"
+    f.write_text("keep")
+    argv = [a.replace("{file}", str(f)).replace("{dir}", str(tmp_path)) for a in argv]
     with pytest.raises(SystemExit) as e:
         main(argv)
     assert e.value.code == 2
@@ -89,7 +101,7 @@ def test_working_point_where_eq32_vanishes(delta, eps, capsys):
      "omega_n_ratio"),
     (["simulate", "--delta", "0.7", "--eps", "0.1", "--w", "2.5", "--omega-n-ratio", "1e170"],
      "omega_n_ratio"),
-    (["rollout", "--controller", "zero", "--out", "{file}"], "File exists"),
+    (["rollout", "--controller", "zero", "--out", "{file}/sub"], "a_file"),
 ])
 def test_library_errors_exit_2_in_one_line(argv, name, tmp_path, capsys):
     """Range errors raised by the library and unwritable outputs: one line naming the cause."""

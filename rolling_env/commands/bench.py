@@ -1,7 +1,7 @@
 """Subcommand bench: speed and memory benchmarks -> results/benchmarks.md."""
 from __future__ import annotations
 
-from ..cli import emit
+from ..cli import emit, file_path
 
 
 def register(sub):
@@ -9,7 +9,7 @@ def register(sub):
                        description="Kernel throughput vs a machine-limit estimate, single env vs "
                        "Pendulum-v1, naive reference at equal accuracy, scene specialisation, "
                        "batched env, start-up and memory; writes a markdown report.")
-    p.add_argument("--out", default="results/benchmarks.md", help="report path")
+    p.add_argument("--out", type=file_path("out"), default="results/benchmarks.md", help="report path")
     p.add_argument("--quick", action="store_true", help="fewer steps and scenes (report not written)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_run)

@@ -1,7 +1,7 @@
 """Subcommand converge: work-precision study -> results/work_precision.{csv,png}."""
 from __future__ import annotations
 
-from ..cli import emit
+from ..cli import emit, folder_path
 
 
 def register(sub):
@@ -13,7 +13,7 @@ def register(sub):
                        "work_precision.csv and .png (work_precision_quick.* with --quick) with "
                        "the observed orders, and print the speed-up over the naive row at equal "
                        "error.")
-    p.add_argument("--out", default="results", help="output folder (default results)")
+    p.add_argument("--out", type=folder_path("out"), default="results", help="output folder (default results)")
     p.add_argument("--quick", action="store_true",
                    help="a smaller, faster subset (writes work_precision_quick.*)")
     p.add_argument("--json", action="store_true", help="print one JSON object")

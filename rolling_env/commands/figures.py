@@ -1,7 +1,7 @@
 """Subcommand figures: the paper's Figs. 6, 8, 9 -> results/paper/ (PNG + CSV)."""
 from __future__ import annotations
 
-from ..cli import emit, finite_float, positive_int
+from ..cli import emit, finite_float, folder_path, positive_int
 
 
 def register(sub):
@@ -10,7 +10,8 @@ def register(sub):
                        "delta 0.93, w 2.2) and the Eq. 32 working points (Fig. 9, delta 0.9, 0.7, "
                        "0.5; w 2.2 and 10) and write PNG + CSV under --out; print the largest "
                        "deviation of each simulated zero line from Eq. 29 / Eq. 32.")
-    p.add_argument("--out", default="results/paper", help="output folder (default results/paper)")
+    p.add_argument("--out", type=folder_path("out"), default="results/paper",
+                   help="output folder (default results/paper)")
     p.add_argument("--points", type=positive_int("points", 5, 401), default=41,
                    help="grid points per axis of the maps (default 41)")
     p.add_argument("--resolution", type=finite_float("resolution", 2, 1e5), default=32.0,

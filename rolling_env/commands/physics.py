@@ -67,8 +67,12 @@ def _working_point(args):
     ex.working_point(args.delta, args.eps, args.w, resolution=4)  # load the compiled kernel
     r = ex.working_point(args.delta, args.eps, args.w, resolution=args.resolution)
     if r["eq32"] is None:
+        wpr = r.get("working_point_ratio")
         human = (f"v*/(omega R) simulated {r['simulated']:.6f}  (w < 2: Eq. 32 does not apply; "
-                 f"corrected formula {r.get('working_point_ratio')})  [{r['seconds']:.3f} s]")
+                 + (f"corrected formula {wpr:.6f})" if wpr is not None else
+                    "below w = 1 + sqrt(delta) some springs never release: no steady working "
+                    "point, the number is the last periods' value)")
+                 + f"  [{r['seconds']:.3f} s]")
     else:
         rel = "n/a (Eq. 32 is 0)" if r["rel_error"] is None else f"{r['rel_error']:.2e}"
         human = (f"v*/(omega R) simulated {r['simulated']:.6f}  Eq. 32 {r['eq32']:.6f}  "

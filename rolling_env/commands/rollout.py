@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..cli import emit, positive_int
+from ..cli import emit, finite_float, folder_path, positive_int
 
 
 def register(sub):
@@ -14,9 +14,10 @@ def register(sub):
     p.add_argument("--controller", default="eq32-feedback",
                    help="random | zero | eq32 | eq32-feedback | path/to/model.zip")
     p.add_argument("--seed", type=positive_int("seed", 0, 2**31 - 1), default=0)
-    p.add_argument("--target", type=float, default=None, help="target displacement [m] "
+    p.add_argument("--target", type=finite_float("target"), default=None, help="target displacement [m] "
                    "(default: drawn from the scene's range with the seed)")
-    p.add_argument("--out", default="results/rollouts", help="output folder")
+    p.add_argument("--out", type=folder_path("out"), default="results/rollouts",
+                   help="output folder")
     p.add_argument("--frame", action="store_true", help="also save the final rendered frame")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_run)

@@ -1,7 +1,7 @@
 """Subcommand stability: extreme and stiff cases -> results/stability.md."""
 from __future__ import annotations
 
-from ..cli import emit
+from ..cli import emit, file_path
 
 
 def register(sub):
@@ -13,7 +13,7 @@ def register(sub):
                        "balance, run time and convergence; write a markdown table (PASS/FAIL per "
                        "case, tolerances stated in it) and print it.  Exit code 1 if any case "
                        "fails.")
-    p.add_argument("--out", default="results/stability.md",
+    p.add_argument("--out", type=file_path("out"), default="results/stability.md",
                    help="report path (default results/stability.md; with --quick the report "
                    "is only printed unless --out is given)")
     p.add_argument("--quick", action="store_true", help="a smaller, faster subset")
