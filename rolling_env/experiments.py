@@ -72,34 +72,74 @@ def _check_common(delta, eps, w, resolution):
     check_range("resolution", resolution, 2.0, 1e5)
 
 
+def _impulse_run(delta, eps, w, vstar_ratio, resolution, geo, ticks_per_half, n_sub,
+                 grid_offset):
+    """A prescribed-runner drive under the square wave: returns ``next_period()``, which runs
+    one more period and gives its impulse of T normalised as I / (2 G* a1^2 tau)."""
+    wave = SquareWave(delta, eps, w, geo.a1, geo.R, geo.tau)
+    drv = _drive(wave, geo, DriveParams(geo.R, geo.E_star, geo.G_star), resolution, grid_offset)
+    drv.reset()
+    d, u, v = wave.ticks(1, ticks_per_half)
+    dt = wave.dt_tick(ticks_per_half)
+    vs = vstar_ratio * wave.omega_R
+    unit = 2 * geo.G_star * wave.a1 ** 2 * wave.tau
+
+    def next_period():
+        out = drv.run(dt_tick=dt, n_sub=n_sub, omega_R=u, v=v, d=d, vstar=vs)
+        return out["impulse"].sum() / unit
+    return next_period
+
+
 def period_impulse(delta, eps, w, vstar_ratio, *, resolution=DEFAULT_RESOLUTION, periods=3,
                    geo: Geometry = Geometry(), ticks_per_half=1, n_sub=1, grid_offset=0.0):
     """Impulse of T over the last of ``periods`` periods with a prescribed runner
     (infinite friction), normalised as I / (2 G* a1^2 tau) (paper Fig. 8)."""
-    wave = SquareWave(delta, eps, w, geo.a1, geo.R, geo.tau)
-    drv = _drive(wave, geo, DriveParams(geo.R, geo.E_star, geo.G_star), resolution, grid_offset)
-    drv.reset()
-    d, u, v = wave.ticks(periods, ticks_per_half)
-    out = drv.run(dt_tick=wave.dt_tick(ticks_per_half), n_sub=n_sub, omega_R=u, v=v, d=d,
-                  vstar=vstar_ratio * wave.omega_R)
-    per = 2 * ticks_per_half
-    I = out["impulse"][-per:].sum()
-    return I / (2 * geo.G_star * wave.a1 ** 2 * wave.tau)
+    if int(periods) != periods or periods < 1:
+        raise ValueError(f"periods must be an integer >= 1, got {periods}")
+    step = _impulse_run(delta, eps, w, vstar_ratio, resolution, geo, ticks_per_half, n_sub,
+                        grid_offset)
+    for _ in range(int(periods)):
+        I = step()
+    return I
+
+
+STEADY_TOL = 1e-12     # periodic steady state: the working point changes less than this per
+STEADY_MAX_PERIODS = 2000  # period (in omega R), checked from ``periods`` on, up to this many
 
 
 def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
-                  geo: Geometry = Geometry(), grid_offset=0.0):
+                  geo: Geometry = Geometry(), grid_offset=0.0, until_steady=True):
     """Simulated working point v*/(omega R): the zero of the period impulse (Eq. 31).
 
     With infinite friction and a prescribed runner the impulse is affine in v*, so two runs
-    give the zero exactly.  Returns a dict with ``simulated``, ``eq32`` (None for w < 2),
-    ``eq29``, ``rel_error`` and ``seconds``."""
+    give the zero exactly.  Both runs go on period by period until the working point of the
+    last period differs from the one before by less than ``STEADY_TOL`` (at least
+    ``periods``, at most ``STEADY_MAX_PERIODS``; for w >= 2 the state is periodic after the
+    first period unless w - 2 and 1 - sqrt(delta) are both below a cell, where the transient
+    decays over many periods).  ``until_steady=False`` runs exactly ``periods`` periods.
+    Returns a dict with ``simulated``, ``eq32`` (None for w < 2), ``eq29``, ``rel_error``,
+    ``periods`` (run), ``steady`` and ``seconds``, and a ``note`` where the run ended without
+    a steady state or where 1 - sqrt(delta) is smaller than two cells (not resolved: relative
+    errors of 1-10% were measured there, several times Eq. 32 when w - 2 is below two cells
+    too)."""
     _check_common(delta, eps, w, resolution)
+    if int(periods) != periods or not 2 <= periods <= STEADY_MAX_PERIODS:
+        raise ValueError(f"periods must be an integer in [2, {STEADY_MAX_PERIODS}], got {periods}")
     t0 = time.perf_counter()
-    kw = dict(resolution=resolution, periods=periods, geo=geo, grid_offset=grid_offset)
-    i0 = period_impulse(delta, eps, w, 0.0, **kw)
-    i1 = period_impulse(delta, eps, w, 0.1, **kw)
-    sim = -0.1 * i0 / (i1 - i0)
+    runs = [_impulse_run(delta, eps, w, V, resolution, geo, 1, 1, grid_offset)
+            for V in (0.0, 0.1)]
+    sim = prev = math.nan
+    steady = False
+    k = 0
+    while k < STEADY_MAX_PERIODS:
+        k += 1
+        i0, i1 = runs[0](), runs[1]()
+        prev, sim = sim, -0.1 * i0 / (i1 - i0)
+        if k >= periods and abs(sim - prev) <= STEADY_TOL:
+            steady = True
+            break
+        if k >= periods and not until_steady:
+            break
     seconds = time.perf_counter() - t0
     eq32 = float(analytic.eq32(delta, eps, w)) if w >= 2 else None
     res = {
@@ -108,15 +148,30 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
         "eq29": float(analytic.eq29(delta, eps)),
         "rel_error": (float(abs(sim - eq32) / abs(eq32)) if eq32 not in (None, 0.0) else None),
         "seconds": seconds,
-        "delta": delta, "eps": eps, "w": w, "resolution": resolution,
+        "delta": delta, "eps": eps, "w": w, "resolution": resolution, "periods": k,
+        "steady": steady,
     }
+    notes = []
+    if not steady:
+        notes.append(f"no periodic steady state within {k} periods (the working point still "
+                     f"changed by {abs(sim - prev):.1e} in the last)")
+    gap = 1.0 - math.sqrt(delta)  # a1 - a2 in a1: the back-step contact edge
+    if 0.0 < gap < 2.0 / resolution:
+        both = w - 2.0 < 2.0 / resolution
+        notes.append(f"1 - sqrt(delta) = {gap:.3g} a1 spans {gap * resolution:.2g} cells: not "
+                     "resolved, the relative error can reach "
+                     + ("several times Eq. 32 (w - 2 is below two cells too)" if both
+                        else "1% at 64 and 10% at 16 cells per a1")
+                     + f"; about {min(math.ceil(8.0 / gap), 1e5):.0f} cells per a1 resolve it")
     if w < 2:
-        res["note"] = "Eq. 32 holds for w >= 2 only; eq32 is null here"
+        notes.append("Eq. 32 holds for w >= 2 only; eq32 is null here")
         try:
             res["working_point_ratio"] = float(analytic.working_point_ratio(delta, eps, w))
         except ValueError as e:
             res["working_point_ratio"] = None
-            res["note"] += f"; {e}"
+            notes.append(str(e))
+    if notes:
+        res["note"] = "; ".join(notes)
     return res
 
 

@@ -262,6 +262,27 @@ def test_bad_dimensionless_inputs_rejected(args, name):
         ex.working_point(*args)
 
 
+def test_working_point_runs_to_periodic_steady_state():
+    """Where w - 2 and 1 - sqrt(delta) are both below a cell the start-up transient decays over
+    many periods: the working point runs until it is periodic (3 periods gave 1.8e-4 for
+    delta = 1, eps = 0, where the answer is 0 by symmetry, and 2.6% off Eq. 32 at
+    (0.995, 0.2, 2.0001)).  ``until_steady=False`` runs exactly ``periods``."""
+    r = ex.working_point(1.0, 0.0, 2.00001)
+    assert abs(r["simulated"]) < 1e-9 and r["steady"] and r["periods"] > 3, f"{r}"
+    r = ex.working_point(0.995, 0.2, 2.0001)
+    assert r["rel_error"] < 2e-3 and r["steady"], f"{r}"
+    fixed = ex.working_point(0.995, 0.2, 2.0001, periods=3, until_steady=False)
+    assert fixed["periods"] == 3 and not fixed["steady"] and fixed["rel_error"] > 1e-2, f"{fixed}"
+
+
+def test_working_point_notes_an_unresolved_back_step_edge():
+    """1 - sqrt(delta) below two cells: the result carries a note with the resolution that
+    resolves it; a resolved case has none."""
+    r = ex.working_point(0.99, 0.2, 2.2)
+    assert "not resolved" in r.get("note", "") and "1596 cells per a1" in r["note"], f"{r}"
+    assert "note" not in ex.working_point(0.7, 0.1, 2.5)
+
+
 def test_drive_params_store_checked_floats():
     """A number given as a string is checked and stored as the float (it was stored as the
     string, and the Drive failed later with a TypeError)."""

@@ -77,6 +77,8 @@ def _working_point(args):
         rel = "n/a (Eq. 32 is 0)" if r["rel_error"] is None else f"{r['rel_error']:.2e}"
         human = (f"v*/(omega R) simulated {r['simulated']:.6f}  Eq. 32 {r['eq32']:.6f}  "
                  f"Eq. 29 {r['eq29']:.6f}  rel. error {rel}  [{r['seconds']:.3f} s]")
+    if r["eq32"] is not None and r.get("note"):
+        human += f"\nnote: {r['note']}"
     emit(r, args.json, human)
     return 0
 
