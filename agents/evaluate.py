@@ -15,6 +15,7 @@ import csv
 import io
 import json
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -102,36 +103,74 @@ def episode_metrics(data: dict, tol: float) -> dict:
             "return": float(data["return"])}
 
 
+def _run_overrides(run: Path, scene: str) -> None:
+    """Refuse a run that was not trained on ``scene`` as it stands: another scene in its
+    config.yml, or scene overrides in its env_kwargs (an agent trained with mu = 0.02 would
+    be reported as if trained on the plain scene)."""
+    import yaml
+
+    from .train import scene_key
+    cfg_path = run / "config.yml"
+    if not cfg_path.exists():
+        return
+    cfg = yaml.safe_load(cfg_path.read_text()) or {}
+    trained = cfg.get("scene")
+    if trained is not None and scene_key(str(trained)) != scene_key(scene):
+        raise ValueError(f"run {str(run)!r} was trained on scene {trained!r}, not {scene!r}: "
+                         "move it under its own scene's folder")
+    extra = {k: v for k, v in dict(cfg.get("env_kwargs") or {}).items() if k != "scene"}
+    if extra:
+        raise ValueError(f"run {str(run)!r} was trained with scene overrides {extra}: it is not "
+                         f"comparable on the plain scene {scene!r}; put the overrides in a "
+                         "scene file, train on it and evaluate that scene")
+
+
+def scene_runs(scene: str, runs: Path) -> list[Path]:
+    """The run folders of a scene: ``<runs>/<scene key>/*/`` (the training script's layout;
+    the key of a scene file is its stem)."""
+    from .train import scene_key
+    return sorted(p for p in (runs / scene_key(scene)).glob("*") if p.is_dir())
+
+
 def controllers_for(scene: str, runs: Path, env) -> dict:
+    """The two baselines and every run's agent (each run checked to be trained on ``scene``)."""
     ctrls = {"eq32-open-loop": Eq32OpenLoop.from_env(env),
              "eq32-feedback": Eq32Feedback.from_env(env)}
-    for run in sorted(p for p in (runs / scene).glob("*") if p.is_dir()):
+    for run in scene_runs(scene, runs):
         model = agent_file(run)
         if model is not None:
+            _run_overrides(run, scene)
             ctrls[run.name] = load_agent(model, env)
             ctrls[run.name].file = model.name
+            ctrls[run.name].run = run
     return ctrls
 
 
 MACHINE = "2-core x86_64 CPU, no GPU"
 
 
-def evaluate_scene(scene: str, runs: Path, episodes: int) -> tuple[list[dict], dict]:
+def evaluate_scene(scene: str, runs: Path, episodes: int, env=None,
+                   ctrls: dict | None = None) -> tuple[list[dict], dict]:
     """Every controller on the scene's held-out targets (episode i: target i, seed
-    EVAL_SEED + i).  Returns one row per controller and the trajectory of target 0 of each."""
-    env = rolling_env.make(scene)
+    EVAL_SEED + i).  Returns one row per controller and the trajectory of target 0 of each.
+    ``env`` and ``ctrls`` (from ``controllers_for``) are built here when not given."""
+    from .train import scene_key
+    env = env if env is not None else rolling_env.make(scene)
+    ctrls = ctrls if ctrls is not None else controllers_for(scene, runs, env)
     tol = env.unwrapped.scene.tolerance
     targets = held_out_targets(scene, episodes)
     rows, trajectories = [], {}
-    for name, ctrl in controllers_for(scene, runs, env).items():
+    for name, ctrl in ctrls.items():
         per = []
         for i, target in enumerate(targets):
             data = rollout(env, ctrl, seed=EVAL_SEED + i, target=target)
             per.append(episode_metrics(data, tol))
             if i == 0:
                 trajectories[name] = data
-        row = {"scene": scene, "controller": name, "model_file": getattr(ctrl, "file", "-"),
-               "episodes": len(per)}
+        row = {"scene": scene_key(scene), "controller": name,
+               "model_file": getattr(ctrl, "file", "-"), "episodes": len(per),
+               "episode_steps": env.unwrapped.scene.episode_steps,
+               "episode_seconds": env.unwrapped.scene.episode_steps * env.unwrapped.scene.dt}
         for key in ("final_abs_error", "rms_error", "slip_work", "return"):
             vals = np.array([p[key] for p in per])
             row[f"{key}_mean"] = float(vals.mean())
@@ -141,15 +180,15 @@ def evaluate_scene(scene: str, runs: Path, episodes: int) -> tuple[list[dict], d
         row["settle_time_mean"] = (float(np.nanmean(settle)) if np.any(np.isfinite(settle))
                                    else float("nan"))
         row["tolerance"] = tol
-        row.update(_budget(runs / scene / name))
+        row.update(_budget(getattr(ctrl, "run", None)))
         rows.append(row)
     env.close()
     return rows, trajectories
 
 
-def _budget(run: Path) -> dict:
-    meta = run / "meta.json"
-    if not meta.exists():
+def _budget(run: Path | None) -> dict:
+    meta = run / "meta.json" if run is not None else None
+    if meta is None or not meta.exists():
         return {"train_env_steps": 0, "train_wall_seconds": 0.0, "machine": "-"}
     m = json.loads(meta.read_text())
     return {"train_env_steps": m["env_steps"], "train_wall_seconds": round(m["wall_seconds"], 1),
@@ -201,11 +240,15 @@ def write_tables(rows: list[dict], out: Path, episodes: int | None = None) -> No
     w.writerows(rows)
     atomic_write(out / "comparison.csv", lambda p: Path(p).write_text(buf.getvalue()))
     n = episodes or (rows[0]["episodes"] if rows else 0)
+    lengths = sorted({(r.get("episode_steps"), r.get("episode_seconds")) for r in rows
+                      if r.get("episode_steps")})
+    length = ("; ".join(f"{k} ticks = {t * 1e3:.3g} ms" for k, t in lengths)
+              or "the scene's episode_steps")
     lines = ["# Controllers compared on held-out targets", "",
              "Generated by `python -m agents.evaluate` (see README).  Per scene every controller "
              f"runs the same {n} held-out targets (drawn with seed {EVAL_SEED} from the "
              "scene's target range; episode i uses env seed "
-             f"{EVAL_SEED} + i), one episode each (512 ticks = 3.2 ms).  Errors in units of the "
+             f"{EVAL_SEED} + i), one episode each ({length}).  Errors in units of the "
              "scene's tolerance; RMS over the whole episode (tracking); *reached* = share of "
              "episodes that end within the tolerance; *settle* = mean time after which "
              "|error| stays within the tolerance (over the episodes that reach it; 'never' if "
@@ -262,7 +305,7 @@ def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path) -> Path:
     ax[1].axhline(1.0, color="k", lw=0.8)
     ax[1].set(xlabel="t [ms]", ylabel="|error| / tolerance", ylim=(1e-2, None),
               title="tracking error (line: tolerance)")
-    for run in sorted(p for p in (runs / scene).glob("*") if p.is_dir()):
+    for run in scene_runs(scene, runs):
         ev = run / "evaluations.npz"
         if ev.exists():
             d = np.load(ev)
@@ -274,7 +317,8 @@ def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path) -> Path:
     if ax[2].lines:
         ax[2].legend(fontsize=7)
     fig.tight_layout()
-    path = atomic_write(out / "plots" / f"{scene}.png",
+    from .train import scene_key
+    path = atomic_write(out / "plots" / f"{scene_key(scene)}.png",
                         lambda p: fig.savefig(p, dpi=80, format="png"))
     plt.close(fig)
     return path
@@ -296,15 +340,30 @@ def main(argv=None):
         except ValueError as e:
             p.error(f"--scenes: {e}")
     out, runs = Path(args.out), Path(args.runs)
-    rows = []
-    for scene in args.scenes:
-        r, traj = evaluate_scene(scene, runs, args.episodes)
+    try:  # the output folder must take files, before any evaluation work
+        out.mkdir(parents=True, exist_ok=True)
+        probe = tempfile.NamedTemporaryFile(dir=out, prefix=".probe.")
+        probe.close()
+    except OSError as e:
+        p.error(f"--out: cannot write to {str(out)!r}: {e}")
+    setups = []
+    for scene in args.scenes:  # every agent loaded and checked before any episode runs
+        env = rolling_env.make(scene)
+        try:
+            setups.append((scene, env, controllers_for(scene, runs, env)))
+        except (ValueError, OSError, KeyError) as e:
+            p.error(f"--runs: {e}")
+    rows, plots = [], []
+    for scene, env, ctrls in setups:
+        r, traj = evaluate_scene(scene, runs, args.episodes, env, ctrls)
         rows += r
-        plot_scene(scene, runs, traj, out)
+        plots.append((scene, traj))
         for row in r:
-            print(f"{scene:20s} {row['controller']:16s} final|e|/tol "
+            print(f"{row['scene']:20s} {row['controller']:16s} final|e|/tol "
                   f"{row['final_abs_error_mean'] / row['tolerance']:8.2f}  reached "
                   f"{row['reached_fraction']:.2f}  slip {row['slip_work_mean']:.3e} J", flush=True)
+    for scene, traj in plots:  # written only once every scene has been evaluated
+        plot_scene(scene, runs, traj, out)
     write_tables(rows, out, args.episodes)
     return 0
 

@@ -7,7 +7,9 @@ The run folder (default ``runs/<scene>/<algo>_seed<seed>``) keeps config.yml, co
 meta.json (seed, package versions, env steps, wall time), the TensorBoard log (tb/), the
 EvalCallback log (evaluations.npz) and best model, periodic checkpoints, and the final
 model.zip with model_vecnormalize.pkl beside it.  Every file is written atomically; Ctrl-C or
-SIGTERM saves a final checkpoint before exiting.
+SIGTERM saves a final checkpoint before exiting with 130 / 143 (128 + the signal).  A run
+folder that already holds files is refused (``--overwrite`` replaces it); there is no resume:
+a stopped run keeps its checkpoint.zip, and a new run starts from scratch in another folder.
 """
 from __future__ import annotations
 
@@ -48,7 +50,11 @@ def build_parser():
     p.add_argument("--n-envs", type=positive_int("n-envs", 1, 4096), default=None,
                    help="override the YAML n_envs")
     p.add_argument("--conf", default=None, help="hyper-parameter YAML (default configs/...)")
-    p.add_argument("--run-dir", default=None, help="run folder (default runs/<scene>/<algo>_seed<seed>)")
+    p.add_argument("--run-dir", default=None, help="run folder (default runs/<scene>/<algo>_seed<seed>); "
+                   "a folder that already holds files is refused unless --overwrite")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing run folder (its files are deleted once the new "
+                   "model is built)")
     p.add_argument("--eval-freq", type=positive_int("eval-freq", 1, 10**12), default=10000,
                    help="env steps between evaluations")
     p.add_argument("--eval-episodes", type=positive_int("eval-episodes", 1, 10**6), default=5)
@@ -129,7 +135,12 @@ def _setup(args):
     set_random_seed(args.seed)
     env = make_vec_env(scene, n_envs, args.seed, env_kwargs)
     eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs)
-    run = Path(args.run_dir or f"runs/{Path(scene).stem}/{args.algo}_seed{args.seed}")
+    run = Path(args.run_dir or f"runs/{scene_key(scene)}/{args.algo}_seed{args.seed}")
+    if run.exists() and (not run.is_dir() or any(run.iterdir())) and not args.overwrite:
+        # a second run into the same folder would mix its files with the first's (and its
+        # first checkpoint would overwrite an interrupted run's): refuse, keep what is there
+        raise UsageError(f"run folder {str(run)!r} already exists and is not empty: give "
+                         "another --run-dir or --seed, or --overwrite to replace it")
     norm = parse_kwargs(hp.get("normalize", False))
     if norm is not None:
         env = VecNormalize(env, gamma=float(hp.get("gamma", 0.99)), **norm)
@@ -143,6 +154,8 @@ def _setup(args):
     model = cls(hp.get("policy", "MlpPolicy"), env, seed=args.seed, verbose=0, device="cpu",
                 tensorboard_log=str(run / "tb"),
                 policy_kwargs=parse_kwargs(hp.get("policy_kwargs")), **kwargs)
+    if args.overwrite and run.exists():
+        shutil.rmtree(run) if run.is_dir() else run.unlink()
     run.mkdir(parents=True, exist_ok=True)
     cfg = dict(hp, n_envs=n_envs, n_timesteps=n_timesteps, algo=args.algo, scene=scene,
                seed=args.seed)
@@ -174,7 +187,10 @@ def train(args) -> Path:
         _AtomicCheckpoint.make(run, max(args.checkpoint_freq, 1)),
     ])
 
+    received = []
+
     def on_term(signum, frame):
+        received.append(signum)
         raise KeyboardInterrupt
     old = signal.signal(signal.SIGTERM, on_term)
     t0 = time.perf_counter()
@@ -199,7 +215,13 @@ def train(args) -> Path:
     }
     atomic_write(run / "meta.json", lambda p: Path(p).write_text(json.dumps(meta, indent=1)))
     print(json.dumps(meta))
+    if interrupted:  # saved, but not finished: the shell convention 128 + signal number
+        raise Interrupted(128 + (received[0] if received else signal.SIGINT))
     return run
+
+
+class Interrupted(Exception):
+    """Training stopped by SIGINT/SIGTERM after its checkpoint was saved; args[0] = exit code."""
 
 
 def scene_key(scene: str) -> str:
@@ -215,6 +237,9 @@ def main(argv=None):
     except UsageError as e:  # a bad scene or hyper-parameter: one line, exit 2, no run folder
         print(f"python -m agents.train: error: {e}", file=sys.stderr)
         return 2
+    except Interrupted as e:  # checkpoint saved; a scheduler must not take the run as done
+        print("python -m agents.train: interrupted; checkpoint.zip saved", file=sys.stderr)
+        return e.args[0]
     return 0
 
 

@@ -189,6 +189,23 @@ def test_short_training_run_saves_loadable_model(tmp_path):
     assert not [p for p in run.iterdir() if p.name.startswith(".")], "scratch files left behind"
 
 
+def test_train_refuses_a_used_run_folder(tmp_path, capsys):
+    """A second run into a folder that holds a run is refused before anything is written (it
+    mixed its files with the first's and overwrote an interrupted run's checkpoint);
+    --overwrite replaces the folder."""
+    from agents.train import main as train_main
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "checkpoint.zip").write_text("earlier run")
+    argv = ["--algo", "ppo", "--run-dir", str(run), "--n-timesteps", "64", "--n-envs", "1",
+            "--eval-freq", "64", "--eval-episodes", "1", "--no-progress"]
+    assert train_main(argv) == 2
+    assert "already exists and is not empty" in capsys.readouterr().err
+    assert (run / "checkpoint.zip").read_text() == "earlier run", "the earlier run was touched"
+    assert train_main(argv + ["--overwrite"]) == 0
+    assert not (run / "checkpoint.zip").exists() and (run / "model.zip").exists()
+
+
 def test_goal_verdicts():
     rows = [dict(scene="s", controller="eq32-open-loop", final_abs_error_mean=4.0,
                  slip_work_mean=1.0),
@@ -210,7 +227,7 @@ def test_interrupted_training_leaves_loadable_checkpoint(tmp_path):
         time.sleep(0.5)
     proc.send_signal(signal.SIGTERM)
     proc.wait(timeout=120)
-    assert proc.returncode == 0
+    assert proc.returncode == 128 + signal.SIGTERM, "an interrupted run must not exit 0"
     meta = json.loads((run / "meta.json").read_text())
     assert meta["interrupted"] and (run / "checkpoint.zip").exists()
     env = rolling_env.make("default")
@@ -374,3 +391,60 @@ def test_evaluate_rejects_a_scene_the_baselines_cannot_drive(tmp_path, capsys):
                        "--episodes", "1", "--out", str(tmp_path / "out")])
     assert e.value.code == 2 and "omega_R_max" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.fixture(scope="module")
+def trained_run(tmp_path_factory):
+    """One tiny PPO run on a scene *file* (copy of heavy_inf_friction named 'myscene')."""
+    from agents.train import main as train_main
+    base = tmp_path_factory.mktemp("evalruns")
+    scene = base / "scenes" / "myscene.yaml"
+    scene.parent.mkdir()
+    scene.write_text((rolling_env.scenes.SCENE_DIR / "heavy_inf_friction.yaml").read_text())
+    runs = base / "runs"
+    assert train_main(["--algo", "ppo", "--scene", str(scene), "--n-timesteps", "64",
+                       "--n-envs", "1", "--eval-freq", "64", "--eval-episodes", "1",
+                       "--no-progress", "--run-dir", str(runs / "myscene" / "ppo_seed0")]) == 0
+    return scene, runs
+
+
+def test_evaluate_finds_the_runs_of_a_scene_file(trained_run, tmp_path):
+    """A scene given as a file: its runs live under <runs>/<stem>/ (where train puts them) and
+    its plot goes to <out>/plots/<stem>.png, not beside the scene file."""
+    from agents.evaluate import main as evaluate_main
+    scene, runs = trained_run
+    out = tmp_path / "out"
+    assert evaluate_main(["--scenes", str(scene), "--runs", str(runs), "--episodes", "1",
+                          "--out", str(out)]) == 0
+    text = (out / "comparison.csv").read_text()
+    assert "ppo_seed0" in text, f"the trained agent was not evaluated:\n{text}"
+    assert (out / "plots" / "myscene.png").exists()
+    assert sorted(p.name for p in scene.parent.iterdir()) == ["myscene.yaml"]
+
+
+@pytest.mark.parametrize("edit,match", [
+    (lambda c: c.update(env_kwargs={"scene": "x", "mu": 0.02}), r"scene overrides \{'mu': 0.02\}"),
+    (lambda c: c.update(scene="resonant"), "was trained on scene 'resonant'"),
+])
+def test_evaluate_refuses_runs_not_trained_on_the_scene(trained_run, tmp_path, capsys, edit,
+                                                        match):
+    """A run trained with scene overrides, or on another scene, is refused (naming it) before
+    any episode runs or any file is written; it was reported as if trained on the plain
+    scene."""
+    import shutil
+
+    from agents.evaluate import main as evaluate_main
+    scene, runs = trained_run
+    mine = tmp_path / "runs" / "myscene"
+    shutil.copytree(runs / "myscene", mine)
+    cfg_path = mine / "ppo_seed0" / "config.yml"
+    cfg = yaml.safe_load(cfg_path.read_text())
+    edit(cfg)
+    cfg_path.write_text(yaml.safe_dump(cfg))
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as e:
+        evaluate_main(["--scenes", str(scene), "--runs", str(tmp_path / "runs"),
+                       "--episodes", "1", "--out", str(out)])
+    assert e.value.code == 2
+    assert len(__import__("re").findall(match, capsys.readouterr().err)) == 1
+    assert not [p for p in out.rglob("*") if p.is_file()], "files written before the check"
