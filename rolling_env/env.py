@@ -83,7 +83,8 @@ class RollingDriveEnv(gym.Env):
     Runner at rest at x* = 0, sphere centred (both travels 0), springs released, no contact
     until the first action.  The target is drawn uniformly from ``[target_min, target_max]``
     (with a random sign if ``target_both_signs``) with the env's seeded generator, or given by
-    ``reset(options={"target": x})`` in metres.
+    ``reset(options={"target": x})`` in metres, |x| <= 10 target_max (where the error
+    observation saturates); "target" is the only option.
 
     ## Episode End
     No terminal state (``terminated`` is always False).  The env truncates after the scene's
@@ -141,14 +142,15 @@ class RollingDriveEnv(gym.Env):
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed=None, options=None):
+        given = target_option(self.scene, options)  # checked before anything changes
         super().reset(seed=seed)
-        self._target[0] = sample_target(self.scene, self.np_random, options)
+        self._target[0] = sample_target(self.scene, self.np_random, given)
         self.drive.reset()
         self._steps[0] = 0
         self._extra[:] = 0.0
         self._extra[0, EK.X_SAT] = 1.0
         EK.reset_obs(0, self._sv, self._target, self._obs)
-        self._history = [0.0]
+        self._history = [0.0] if self.render_mode is not None else []
         return self._obs[0].copy(), self._info()
 
     def step(self, action):
@@ -159,9 +161,10 @@ class RollingDriveEnv(gym.Env):
         if bad:
             raise_step_error(bad, a, (3,), st)
         x = self._extra[0]
-        self._history.append(x[EK.X_XS])
-        if self.render_mode == "human":
-            self.render()
+        if self.render_mode is not None:  # the runner's path, for the rendered frame only
+            self._history.append(x[EK.X_XS])
+            if self.render_mode == "human":
+                self.render()
         truncated = bool(self._steps[0] >= self.scene.episode_steps)
         return self._obs[0].copy(), float(x[EK.X_REWARD]), False, truncated, self._info()
 
@@ -215,19 +218,39 @@ def check_time_limit(max_episode_steps, scene: Scene) -> int:
     return int(m)
 
 
-def sample_target(scene: Scene, rng, options) -> float:
-    """options['target'] [m] if given (checked), else uniform in [target_min, target_max] with a
-    random sign when target_both_signs, drawn from the env's generator ``rng``."""
-    if options is not None and "target" in options:
-        t = options["target"]
-        try:
-            t = float(t)
-        except (TypeError, ValueError):
-            raise ValueError(f"options['target'] must be a number [m], got {t!r}") from None
-        if not math.isfinite(t) or abs(t) > 1.0:
-            raise ValueError(f"options['target'] must be a finite displacement in [-1, 1] m, "
-                             f"got {t!r}")
-        return t
+def target_option(scene: Scene, options) -> float | None:
+    """The target [m] that ``reset(options=...)`` asks for, checked, or None to draw one.
+    ``options`` is None or a dict whose only key is "target": a finite number with
+    |target| <= OBS_BOUND target_max (beyond, the error observation would sit at its clip
+    for the whole episode)."""
+    if options is None:
+        return None
+    if not isinstance(options, dict):
+        raise ValueError(f"options must be a dict (e.g. {{'target': 3e-7}}) or None, got "
+                         f"{options!r}")
+    unknown = set(options) - {"target"}
+    if unknown:
+        raise ValueError(f"options has unknown key(s) {sorted(map(str, unknown))}; the only "
+                         "option is 'target' [m]")
+    if "target" not in options:
+        return None
+    t = options["target"]
+    if isinstance(t, (bool, np.bool_)) or not isinstance(t, numbers.Real):
+        raise ValueError(f"options['target'] must be a number [m], got {t!r}")
+    t = float(t)
+    lim = OBS_BOUND * scene.target_max
+    if not (math.isfinite(t) and abs(t) <= lim):
+        raise ValueError(f"options['target'] must be a finite displacement in [-{lim:g}, {lim:g}]"
+                         f" m (OBS_BOUND x the scene's target_max, where the error observation "
+                         f"saturates), got {t!r}")
+    return t
+
+
+def sample_target(scene: Scene, rng, given: float | None) -> float:
+    """``given`` (from ``target_option``) if not None, else uniform in [target_min,
+    target_max] with a random sign when target_both_signs, drawn from the env's generator."""
+    if given is not None:
+        return given
     mag = rng.uniform(scene.target_min, scene.target_max)
     sign = rng.choice((-1.0, 1.0)) if scene.target_both_signs else 1.0
     return float(sign * mag)
@@ -270,21 +293,27 @@ def check_actions(action, shape) -> np.ndarray:
     return a
 
 
+INFO_COLUMNS = {  # info key: column of the env kernel's extras (see _envkernel.X_*)
+    "reward_track": EK.X_TRACK, "reward_wear": EK.X_WEAR, "xstar": EK.X_XS, "vstar": EK.X_VS,
+    "slip_work": EK.X_SLIP, "N": EK.X_N, "T": EK.X_T, "stick_fraction": EK.X_STICK,
+    "omega_R": EK.X_U, "v": EK.X_V, "saturation": EK.X_SAT,
+}
+
+
 def info_dict(x, target) -> dict:
-    """The per-step info of one env from its row of the kernel's extras."""
-    return {
-        "reward_track": float(x[EK.X_TRACK]),
-        "reward_wear": float(x[EK.X_WEAR]),
-        "target": float(target),
-        "xstar": float(x[EK.X_XS]),
-        "vstar": float(x[EK.X_VS]),
-        "error": float(target - x[EK.X_XS]),
-        "slip_work": float(x[EK.X_SLIP]),
-        "N": float(x[EK.X_N]),
-        "T": float(x[EK.X_T]),
-        "stick_fraction": float(x[EK.X_STICK]),
-        "omega_R": float(x[EK.X_U]),
-        "v": float(x[EK.X_V]),
-        "saturation": float(x[EK.X_SAT]),
-        "saturated": bool(x[EK.X_SAT] < 1.0),
-    }
+    """The per-step info of one env from its row of the kernel's extras: the columns of
+    ``INFO_COLUMNS`` plus target, error = target - x* and saturated = saturation < 1."""
+    d = {k: float(x[c]) for k, c in INFO_COLUMNS.items()}
+    d["target"] = float(target)
+    d["error"] = float(target - x[EK.X_XS])
+    d["saturated"] = bool(x[EK.X_SAT] < 1.0)
+    return d
+
+
+def info_arrays(extra, target) -> dict:
+    """``info_dict`` of every env as arrays (float64; saturated bool), one entry per env."""
+    d = {k: extra[:, c].copy() for k, c in INFO_COLUMNS.items()}
+    d["target"] = np.array(target, dtype=np.float64)
+    d["error"] = target - extra[:, EK.X_XS]
+    d["saturated"] = extra[:, EK.X_SAT] < 1.0
+    return d

@@ -26,8 +26,8 @@ from gymnasium.utils import seeding
 
 from . import _envkernel as EK
 from . import _kernel as K
-from .env import (OBS_NAMES, build_drive, check_time_limit, info_dict, load_actions,
-                  raise_step_error, sample_target)
+from .env import (OBS_NAMES, build_drive, check_time_limit, info_arrays, info_dict,
+                  load_actions, raise_step_error, sample_target, target_option)
 from .scenes import load_scene
 
 PARALLEL_MIN_ENVS = 4
@@ -48,8 +48,9 @@ class BatchCore:
                          "obs", "extra", "rngs"})
 
     def __init__(self, num_envs: int, scene="default", max_episode_steps=None, **overrides):
-        if int(num_envs) != num_envs or num_envs < 1:
-            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs}")
+        if (isinstance(num_envs, (bool, np.bool_)) or not isinstance(num_envs, numbers.Integral)
+                or num_envs < 1):
+            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         n = int(num_envs)
         self.num_envs = n
         self.scene = load_scene(scene, **overrides)
@@ -97,14 +98,15 @@ class BatchCore:
     def reset(self, mask=None, options=None) -> None:
         """Reset the envs where ``mask`` is True (all when None).  ``options``: one dict for
         every env, or a sequence of num_envs dicts (or None), one per env."""
-        per_env = isinstance(options, (list, tuple))
+        per_env = isinstance(options, (list, tuple, np.ndarray))
         if per_env and len(options) != self.num_envs:
             raise ValueError(f"options must be a dict or a sequence of num_envs = "
                              f"{self.num_envs} dicts, got {len(options)}")
         idx = range(self.num_envs) if mask is None else np.flatnonzero(mask)
-        for i in idx:
-            self.target[i] = sample_target(self.scene, self.rngs[i],
-                                           options[i] if per_env else options)
+        # every env's options checked before any env changes: a bad one resets nothing
+        given = [target_option(self.scene, options[i] if per_env else options) for i in idx]
+        for i, g in zip(idx, given):
+            self.target[i] = sample_target(self.scene, self.rngs[i], g)
             self.U[i] = 0.0
             self.st[i] = 0.0
             self.steps[i] = 0
@@ -160,6 +162,7 @@ class RollingDriveVectorEnv(_gym_vector_base()):
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._autoreset = np.zeros(self.num_envs, dtype=bool)
+        self._act = np.zeros((self.num_envs, 3))
 
     def reset(self, *, seed=None, options=None):
         if seed is not None:
@@ -168,10 +171,10 @@ class RollingDriveVectorEnv(_gym_vector_base()):
                 self.action_space.seed(int(seed))
         self.core.reset(None, options)
         self._autoreset[:] = False
-        return self.core.obs.copy(), self._infos(np.ones(self.num_envs, bool))
+        return self.core.obs.copy(), self._infos()
 
     def step(self, actions):
-        actions = np.asarray(actions, dtype=np.float64)
+        actions = load_actions(actions, (self.num_envs, 3), self._act)  # checked like the env
         was_done = self._autoreset.copy()
         obs, rew, trunc = self.core.step(np.where(was_done[:, None], 0.0, actions)
                                          if was_done.any() else actions)
@@ -183,14 +186,15 @@ class RollingDriveVectorEnv(_gym_vector_base()):
             trunc[was_done] = False
         term = np.zeros(self.num_envs, dtype=bool)
         self._autoreset = trunc | term
-        return obs, rew, term, trunc, self._infos(~was_done)
+        return obs, rew, term, trunc, self._infos()
 
-    def _infos(self, mask) -> dict:
-        x = self.core.extra
-        return {"reward_track": np.where(mask, x[:, EK.X_TRACK], 0.0),
-                "reward_wear": np.where(mask, x[:, EK.X_WEAR], 0.0),
-                "xstar": x[:, EK.X_XS].copy(), "target": self.core.target.copy(),
-                "slip_work": np.where(mask, x[:, EK.X_SLIP], 0.0)}
+    def _infos(self) -> dict:
+        """The single env's info keys as arrays with Gymnasium's ``_key`` masks (every env
+        reports each key; an env reset this step reports its reset info, as in "sync")."""
+        d = info_arrays(self.core.extra, self.core.target)
+        for k in list(d):
+            d["_" + k] = np.ones(self.num_envs, dtype=bool)
+        return d
 
 
 # ----------------------------------------------------------------------------- Stable-Baselines3
@@ -205,7 +209,11 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
     ``truncated and not terminated``.  Wrap with ``VecMonitor`` for episode statistics.
     Infos carry the reward terms of every env; the terminal keys only for those that ended."""
 
-    def __init__(self, num_envs: int = 1, scene="default", max_episode_steps=None, **overrides):
+    def __init__(self, num_envs: int = 1, scene="default", max_episode_steps=None,
+                 render_mode=None, **overrides):
+        if render_mode is not None:
+            raise ValueError("render_mode must be None: the batched env does not render; use "
+                             "a single env (rolling_env.make(..., render_mode='rgb_array'))")
         self.core = BatchCore(num_envs, scene=scene, max_episode_steps=max_episode_steps,
                               **overrides)
         self.render_mode = None  # set before the base class reads it
@@ -245,6 +253,8 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
     # (``BatchCore.PER_ENV``: ``target``, ``steps``, ``rngs``, ...) is read and written per
     # index; anything else is shared by the batch: read for every index, written only for
     # all envs at once.
+    SHARED_WRITABLE = frozenset({"max_episode_steps"})
+
     def _per_env(self, attr_name) -> bool:
         return attr_name in BatchCore.PER_ENV
 
@@ -272,6 +282,12 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
                     target[i] = value
             else:
                 target[idx] = value
+        elif attr_name not in self.SHARED_WRITABLE:
+            # the scene, its kernel constants and the array sizes are fixed at construction:
+            # setting them would leave the physics on the old values (or the arrays too short)
+            raise AttributeError(f"{attr_name!r} is fixed when the batch is built (make a new "
+                                 f"env to change it); writable: {sorted(self.SHARED_WRITABLE)} "
+                                 f"and per env {sorted(BatchCore.PER_ENV)}")
         elif sorted(idx) == list(range(self.num_envs)):
             setattr(self.core, attr_name, value)
         else:

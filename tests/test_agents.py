@@ -98,7 +98,7 @@ def test_relaxation_time_matches_simulated_lag():
     delta, creep = d.choose(0.5 * d.v_max)
     v = d.speed(delta, creep)
     tr = d.relaxation_time(delta)
-    env.reset(seed=0, options={"target": 1.0})
+    env.reset(seed=0, options={"target": env.unwrapped.scene.target_max})  # not used by d.action
     x = []
     for k in range(512):
         x.append(env.step(d.action(k, delta, creep, 1))[4]["xstar"])

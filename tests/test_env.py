@@ -391,3 +391,39 @@ def test_vanishing_runner_mass_tends_to_massless():
     scale = np.max(np.abs(runs[0.0]))
     err = np.max(np.abs(runs[1e-100] - runs[0.0]))
     assert scale > 0 and err <= 1e-9 * scale, f"x* differs by {err:.3g} m (scale {scale:.3g} m)"
+
+
+@pytest.mark.parametrize("options,match", [
+    ({"target": 1e-3}, r"options\['target'\] must be a finite displacement in \[-5e-06, 5e-06\]"),
+    ({"target": True}, r"options\['target'\] must be a number"),
+    ({"target": float("nan")}, "finite displacement"),
+    ({"targte": 1e-7}, r"unknown key\(s\) \['targte'\]"),
+    ([{"target": 1e-7}], "options must be a dict"),
+])
+def test_reset_target_option_checked_before_anything_changes(options, match):
+    """A target the error observation cannot show (beyond OBS_BOUND target_max it sits at its
+    clip all episode), a boolean, a mistyped key: ValueError, and the env's generator is not
+    reseeded (it was, before the option raised)."""
+    env = gym.make("RollingDrive-v0")
+    env.reset(seed=1)
+    state = env.unwrapped.np_random.bit_generator.state
+    with pytest.raises(ValueError, match=match):
+        env.reset(seed=2, options=options)
+    assert env.unwrapped.np_random.bit_generator.state == state
+    edge = -10 * env.unwrapped.scene.target_max  # OBS_BOUND x target_max: still allowed
+    obs, _ = env.reset(options={"target": edge})
+    assert obs[0] == -10.0 and env.unwrapped.target == edge
+
+
+def test_history_kept_only_for_rendering():
+    """Without a render_mode the env keeps no per-step history (it grew ~39 MB per 1e6 steps)."""
+    env = gym.make("RollingDrive-v0")
+    env.reset(seed=0)
+    for _ in range(20):
+        env.step(env.action_space.sample())
+    assert env.unwrapped._history == []
+    env = gym.make("RollingDrive-v0", render_mode="rgb_array")
+    env.reset(seed=0)
+    for _ in range(20):
+        env.step(env.action_space.sample())
+    assert len(env.unwrapped._history) == 21 and env.render().ndim == 3

@@ -144,8 +144,10 @@ def test_sb3_vecenv_per_env_options_and_indices():
     assert v.core.target[1:].tolist() == before[1:].tolist()
     v.set_attr("target", 3e-7, indices=[2])
     assert v.core.target[2] == 3e-7 and v.core.target[1] == 2e-7
-    with pytest.raises(NotImplementedError, match="shared by every env"):
+    with pytest.raises(AttributeError, match="'sv' is fixed when the batch is built"):
         v.set_attr("sv", 0.0, indices=[1])
+    with pytest.raises(NotImplementedError, match="shared by every env"):
+        v.set_attr("max_episode_steps", 100, indices=[1])
     with pytest.raises(NotImplementedError, match="whole batch"):
         v.env_method("seed", 1, indices=[1])
 
@@ -161,8 +163,21 @@ def test_shared_attributes_stay_shared_whatever_the_batch_size():
     assert isinstance(sv, np.ndarray) and sv.shape == (n,), "sv was split per env"
     rngs = v.get_attr("rngs", indices=[0, 2])
     assert rngs[0] is v.core.rngs[0] and rngs[1] is v.core.rngs[2]
-    with pytest.raises(NotImplementedError, match="shared by every env"):
+    with pytest.raises(AttributeError, match="'sv' is fixed when the batch is built"):
         v.set_attr("sv", sv, indices=[1])
+
+
+@pytest.mark.parametrize("name,value", [("scene", "resonant"), ("num_envs", 5),
+                                        ("features", (None, None, None, None))])
+def test_sb3_set_attr_refuses_what_is_fixed_at_construction(name, value):
+    """Setting the scene (the kernel kept the old physics: trajectories stayed those of the
+    old scene while get_attr reported the new one) or the batch size (arrays too short) is
+    refused, and nothing changes."""
+    v = RollingDriveVecEnv(2)
+    before = getattr(v.core, name)
+    with pytest.raises(AttributeError, match=f"'{name}' is fixed when the batch is built"):
+        v.set_attr(name, value)
+    assert getattr(v.core, name) is before
 
 
 def test_gymnasium_vector_env_accepts_a_list_of_seeds():
@@ -195,3 +210,54 @@ def test_seeds_are_checked_integers():
         sb3_env.set_attr("max_episode_steps", 10**9)
     sb3_env.set_attr("max_episode_steps", 100)
     assert sb3_env.core.max_episode_steps == 100
+
+
+def test_gymnasium_vector_infos_match_sync_mode():
+    """The batched vector env reports the single env's info keys (error, vstar, N, T,
+    saturated, ...) with Gymnasium's _key masks, equal to "sync" mode's at every step,
+    autoreset steps included (it reported 5 of the 14 keys)."""
+    kw = dict(num_envs=3, episode_steps=6)
+    ours = gym.make_vec("RollingDrive-v0", vectorization_mode="vector_entry_point", **kw)
+    sync = gym.make_vec("RollingDrive-v0", vectorization_mode="sync", **kw)
+    infos = [ours.reset(seed=3)[1], sync.reset(seed=3)[1]]
+    for acts in _actions(2, n=3, steps=14):
+        infos = [ours.step(acts)[4], sync.step(acts)[4]]
+        a, b = infos
+        assert set(a) == set(b), f"keys differ: {set(a) ^ set(b)}"
+        for k in b:
+            assert a[k].dtype == b[k].dtype and np.array_equal(a[k], b[k]), f"info[{k!r}] differs"
+
+
+def test_gymnasium_vector_env_checks_action_types():
+    """Strings and booleans are rejected like the single env does (they were cast to float)."""
+    venv = gym.make_vec("RollingDrive-v0", num_envs=2, vectorization_mode="vector_entry_point")
+    venv.reset(seed=0)
+    for bad in ([["1", "0.5", "0"]] * 2, np.ones((2, 3), bool)):
+        with pytest.raises(ValueError, match="action must be real numbers"):
+            venv.step(bad)
+
+
+def test_batch_reset_with_a_bad_option_changes_nothing():
+    """All options are checked before any env is reset (env 0 was reset before env 1's bad
+    option raised)."""
+    venv = gym.make_vec("RollingDrive-v0", num_envs=3, vectorization_mode="vector_entry_point")
+    venv.reset(seed=0)
+    for _ in range(5):
+        venv.step(np.zeros((3, 3)))
+    core = venv.unwrapped.core
+    state = (core.steps.copy(), core.target.copy(), core.st.copy())
+    for bad in ([{"target": 1e-7}, {"target": "x"}, None], [{"target": 1e-7}, {"targte": 1}, None]):
+        with pytest.raises(ValueError, match="options"):
+            venv.reset(options=bad)
+        assert all(np.array_equal(x, y) for x, y in zip(state, (core.steps, core.target, core.st)))
+
+
+@pytest.mark.parametrize("bad", [None, True, 2.0, 0])
+def test_num_envs_must_be_a_positive_integer(bad):
+    with pytest.raises(ValueError, match="num_envs must be an integer >= 1"):
+        BatchCore(bad)
+
+
+def test_sb3_vecenv_render_mode_named():
+    with pytest.raises(ValueError, match="render_mode must be None"):
+        RollingDriveVecEnv(2, render_mode="rgb_array")
