@@ -64,9 +64,16 @@ def make_vec_env(scene, n_envs: int, seed: int, env_kwargs: dict | None = None):
     return venv
 
 
+SAVED_AT = "rolling_drive_saved_at_timesteps"  # attribute of saved VecNormalize statistics
+
+
 def save_model(model, vecnorm, folder: str | os.PathLike, name: str = "model") -> Path:
-    """Save ``<name>.zip`` and, beside it, ``<name>_vecnormalize.pkl`` atomically."""
+    """Save ``<name>.zip`` and, beside it, ``<name>_vecnormalize.pkl`` atomically.  The
+    statistics carry the model's step count (``SAVED_AT``): two files cannot be replaced in
+    one atomic step, so a process killed between the two writes leaves a pair that
+    ``evaluate.load_agent`` recognises as mismatched instead of silently using it."""
     folder = Path(folder)
     if vecnorm is not None:
+        setattr(vecnorm, SAVED_AT, int(model.num_timesteps))
         atomic_write(folder / f"{name}_vecnormalize.pkl", vecnorm.save)
     return atomic_write(folder / f"{name}.zip", model.save)

@@ -25,7 +25,7 @@ from rolling_env.rollout import rollout
 from rolling_env.scenes import load_scene
 
 from .baselines import Eq32Design, Eq32Feedback, Eq32OpenLoop
-from .common import atomic_write
+from .common import SAVED_AT, atomic_write
 
 EVAL_SEED = 20261122  # held out: training uses seeds < 1e6, evaluation envs seed + 10000
 
@@ -61,6 +61,11 @@ def load_agent(path, env=None) -> NormalizedAgent:
     if stats.exists():
         scene = env.unwrapped.scene if env is not None else "default"
         vecnorm = VecNormalize.load(str(stats), DummyVecEnv([lambda: rolling_env.make(scene)]))
+        saved_at = getattr(vecnorm, SAVED_AT, None)  # absent in files saved before the tag
+        if saved_at is not None and saved_at != model.num_timesteps:
+            raise ValueError(f"{stats.name} was saved at step {saved_at} but {path.name} at "
+                             f"step {model.num_timesteps} (a save interrupted between the two "
+                             "files): they do not belong together; use another model of the run")
         vecnorm.training = False
         vecnorm.norm_reward = False
     return NormalizedAgent(model, vecnorm)

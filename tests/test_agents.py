@@ -448,3 +448,23 @@ def test_evaluate_refuses_runs_not_trained_on_the_scene(trained_run, tmp_path, c
     assert e.value.code == 2
     assert len(__import__("re").findall(match, capsys.readouterr().err)) == 1
     assert not [p for p in out.rglob("*") if p.is_file()], "files written before the check"
+
+
+def test_mismatched_model_and_statistics_are_refused(trained_run, tmp_path):
+    """A model and VecNormalize statistics saved at different steps (a kill between the two
+    writes of save_model) are refused by load_agent, naming both files."""
+    import shutil
+
+    from agents.common import SAVED_AT
+    scene, runs = trained_run
+    run = tmp_path / "run"
+    shutil.copytree(runs / "myscene" / "ppo_seed0", run)
+    env = rolling_env.make(str(scene))
+    load_agent(run / "model.zip", env)  # a consistent pair loads
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+    stats = run / "model_vecnormalize.pkl"
+    vn = VecNormalize.load(str(stats), DummyVecEnv([lambda: rolling_env.make(str(scene))]))
+    setattr(vn, SAVED_AT, getattr(vn, SAVED_AT) + 1)  # as if saved one step later
+    vn.save(str(stats))
+    with pytest.raises(ValueError, match="model_vecnormalize.pkl was saved at step"):
+        load_agent(run / "model.zip", env)
