@@ -135,6 +135,7 @@ class RollingDriveEnv(gym.Env):
         self._obs = np.zeros((1, EK.N_OBS), dtype=np.float32)
         self._extra = np.zeros((1, EK.N_X))
         self._history = []
+        self._render_state = {}  # this env's figure and window (rolling_env.render)
 
     @property
     def target(self) -> float:
@@ -173,16 +174,16 @@ class RollingDriveEnv(gym.Env):
             gym.logger.warn("render() called without a render_mode; set render_mode='rgb_array'")
             return None
         from .render import render_frame
-        frame = render_frame(self)
+        frame = render_frame(self, self._render_state)
         if self.render_mode == "human":
             from .render import show
-            show(frame)
+            show(frame, self._render_state)
             return None
         return frame
 
     def close(self):
         from .render import close
-        close()
+        close(self._render_state)
 
     def _info(self) -> dict:
         return info_dict(self._extra[0], self._target[0])

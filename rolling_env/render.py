@@ -1,27 +1,28 @@
-"""Frames of RollingDrive-v0: the contact along the spring row and the runner against its target."""
+"""Frames of RollingDrive-v0: the contact along the spring row and the runner against its target.
+
+Each env keeps its own figure and window in a dict (``state``, held by the env): two envs
+rendering at once do not share a window, and closing one leaves the other's open."""
 from __future__ import annotations
 
 import numpy as np
 
-_FIG = {}
 
-
-def _figure():
-    if "fig" not in _FIG:
+def _figure(state: dict):
+    if "fig" not in state:
         import matplotlib
         from matplotlib.figure import Figure
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         matplotlib.rcParams.update({"font.size": 8})
         fig = Figure(figsize=(6.4, 4.8), dpi=100)
         FigureCanvasAgg(fig)
-        _FIG["fig"] = fig
-    return _FIG["fig"]
+        state["fig"] = fig
+    return state["fig"]
 
 
-def render_frame(env) -> np.ndarray:
+def render_frame(env, state: dict) -> np.ndarray:
     """uint8 (480, 640, 3) frame: top, normal and tangential deflection along the row with
     stick (blue) and slip (red) cells; bottom, runner displacement against the target."""
-    fig = _figure()
+    fig = _figure(state)
     fig.clear()
     ax1, ax2 = fig.subplots(2, 1)
     drv = env.drive
@@ -59,21 +60,22 @@ def render_frame(env) -> np.ndarray:
     return np.ascontiguousarray(buf[:, :, :3], dtype=np.uint8)
 
 
-def show(frame: np.ndarray) -> None:
+def show(frame: np.ndarray, state: dict) -> None:
     import matplotlib.pyplot as plt
-    if "win" not in _FIG:
+    if "win" not in state:
         plt.ion()
-        _FIG["win"] = plt.figure("RollingDrive-v0")
-        _FIG["img"] = _FIG["win"].add_subplot(111).imshow(frame)
-        _FIG["win"].axes[0].axis("off")
+        state["win"] = plt.figure()
+        state["win"].canvas.manager.set_window_title("RollingDrive-v0")
+        state["img"] = state["win"].add_subplot(111).imshow(frame)
+        state["win"].axes[0].axis("off")
     else:
-        _FIG["img"].set_data(frame)
-    _FIG["win"].canvas.draw_idle()
+        state["img"].set_data(frame)
+    state["win"].canvas.draw_idle()
     plt.pause(0.001)
 
 
-def close() -> None:
-    if "win" in _FIG:
+def close(state: dict) -> None:
+    if "win" in state:
         import matplotlib.pyplot as plt
-        plt.close(_FIG.pop("win"))
-        _FIG.pop("img", None)
+        plt.close(state.pop("win"))
+        state.pop("img", None)

@@ -427,3 +427,22 @@ def test_history_kept_only_for_rendering():
     for _ in range(20):
         env.step(env.action_space.sample())
     assert len(env.unwrapped._history) == 21 and env.render().ndim == 3
+
+
+def test_human_render_windows_are_per_env():
+    """Two envs rendering to windows each get their own; closing one keeps the other's (they
+    shared one module-level window)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    plt.close("all")
+    envs = [gym.make("RollingDrive-v0", render_mode="human") for _ in range(2)]
+    for e in envs:
+        e.reset(seed=0)
+        e.step(np.zeros(3, np.float32))
+    assert len(plt.get_fignums()) == 2
+    envs[0].close()
+    assert len(plt.get_fignums()) == 1
+    envs[1].step(np.zeros(3, np.float32))
+    envs[1].close()
+    assert plt.get_fignums() == []
