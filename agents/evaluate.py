@@ -71,18 +71,22 @@ def load_agent(path, env=None) -> NormalizedAgent:
     return NormalizedAgent(model, vecnorm)
 
 
-def agent_file(run: Path) -> Path | None:
-    """The model of a run to evaluate: EvalCallback's best model (selected on the training
-    script's own eval env, never on the held-out targets here) when its VecNormalize
-    statistics were saved with it, else the final model, else an interrupted run's
+def agent_files(run: Path) -> list[Path]:
+    """The models of a run in the order they are tried: EvalCallback's best model (selected
+    on the training script's own eval env, never on the held-out targets here) when its
+    VecNormalize statistics were saved with it, the final model, an interrupted run's
     checkpoint."""
+    files = []
     best = run / "best_model.zip"
     if best.exists() and (run / "best_model_vecnormalize.pkl").exists():
-        return best
-    for name in ("model.zip", "checkpoint.zip"):
-        if (run / name).exists():
-            return run / name
-    return None
+        files.append(best)
+    return files + [run / n for n in ("model.zip", "checkpoint.zip") if (run / n).exists()]
+
+
+def agent_file(run: Path) -> Path | None:
+    """The first of ``agent_files`` (None for a run without a model)."""
+    files = agent_files(run)
+    return files[0] if files else None
 
 
 def held_out_targets(scene, n: int) -> list[float]:
@@ -142,12 +146,20 @@ def controllers_for(scene: str, runs: Path, env) -> dict:
     ctrls = {"eq32-open-loop": Eq32OpenLoop.from_env(env),
              "eq32-feedback": Eq32Feedback.from_env(env)}
     for run in scene_runs(scene, runs):
-        model = agent_file(run)
-        if model is not None:
+        files = agent_files(run)
+        if files:
             _run_overrides(run, scene)
-            ctrls[run.name] = load_agent(model, env)
-            ctrls[run.name].file = model.name
-            ctrls[run.name].run = run
+        for k, model in enumerate(files):
+            try:
+                agent = load_agent(model, env)
+            except ValueError as e:  # a model / statistics pair that does not belong together
+                if k == len(files) - 1:
+                    raise
+                print(f"warning: {run}: {e}; trying {files[k + 1].name}", file=sys.stderr)
+                continue
+            agent.file, agent.run = model.name, run
+            ctrls[run.name] = agent
+            break
     return ctrls
 
 

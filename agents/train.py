@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import re
 import shutil
 import signal
 import sys
@@ -136,11 +137,16 @@ def _setup(args):
     env = make_vec_env(scene, n_envs, args.seed, env_kwargs)
     eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs)
     run = Path(args.run_dir or f"runs/{scene_key(scene)}/{args.algo}_seed{args.seed}")
-    if run.exists() and (not run.is_dir() or any(run.iterdir())) and not args.overwrite:
+    if run.exists() and (not run.is_dir() or any(run.iterdir())):
         # a second run into the same folder would mix its files with the first's (and its
         # first checkpoint would overwrite an interrupted run's): refuse, keep what is there
-        raise UsageError(f"run folder {str(run)!r} already exists and is not empty: give "
-                         "another --run-dir or --seed, or --overwrite to replace it")
+        if not args.overwrite:
+            raise UsageError(f"run folder {str(run)!r} already exists and is not empty: give "
+                             "another --run-dir or --seed, or --overwrite to replace it")
+        why = _not_a_run(run)
+        if why:
+            raise UsageError(f"--overwrite replaces only a run folder written by this script; "
+                             f"{str(run)!r} {why}: nothing was deleted")
     norm = parse_kwargs(hp.get("normalize", False))
     if norm is not None:
         env = VecNormalize(env, gamma=float(hp.get("gamma", 0.99)), **norm)
@@ -162,6 +168,30 @@ def _setup(args):
     atomic_write(run / "config.yml", lambda p: Path(p).write_text(yaml.safe_dump(cfg)))
     atomic_write(run / "command.txt", lambda p: Path(p).write_text(" ".join(sys.argv) + "\n"))
     return model, eval_env, run, n_envs, n_timesteps
+
+
+RUN_FILES = re.compile(r"^(config\.yml|command\.txt|meta\.json|evaluations\.npz|tb|"
+                       r"(model|best_model|checkpoint)(\.zip|_vecnormalize\.pkl))$")
+
+
+def _not_a_run(run: Path) -> str:
+    """Why ``run`` is not a folder that --overwrite may delete ('' if it is one): a folder of
+    this script's files only (config.yml or meta.json among them, plus models, statistics,
+    logs and the leftovers of atomic writes), not the working folder, one of its parents or
+    the home folder."""
+    here = Path.cwd().resolve()
+    target = run.resolve()
+    if target == here or target in here.parents or target == Path.home().resolve():
+        return "is the working folder, one of its parents or the home folder"
+    if not run.is_dir():
+        return "is not a folder"
+    names = [p.name for p in run.iterdir()]
+    if not {"config.yml", "meta.json"} & set(names):
+        return "has no config.yml or meta.json"
+    other = [n for n in names if not (RUN_FILES.match(n) or n.startswith("."))]
+    if other:
+        return f"holds files a run does not write ({', '.join(sorted(other)[:5])})"
+    return ""
 
 
 def train(args) -> Path:

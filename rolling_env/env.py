@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Mapping
 
 import gymnasium as gym
 import numpy as np
@@ -226,7 +227,7 @@ def target_option(scene: Scene, options) -> float | None:
     for the whole episode)."""
     if options is None:
         return None
-    if not isinstance(options, dict):
+    if not isinstance(options, Mapping):
         raise ValueError(f"options must be a dict (e.g. {{'target': 3e-7}}) or None, got "
                          f"{options!r}")
     unknown = set(options) - {"target"}
@@ -236,6 +237,8 @@ def target_option(scene: Scene, options) -> float | None:
     if "target" not in options:
         return None
     t = options["target"]
+    if isinstance(t, np.ndarray) and t.ndim == 0:
+        t = t.item()  # a 0-d array is its number
     if isinstance(t, (bool, np.bool_)) or not isinstance(t, numbers.Real):
         raise ValueError(f"options['target'] must be a number [m], got {t!r}")
     t = float(t)
@@ -261,13 +264,19 @@ def load_actions(action, shape, dest) -> np.ndarray:
     """Copy actions of ``shape`` into the env kernel's float64 buffer ``dest``.  A wrong shape or
     a non-numeric type raises here (``check_actions`` names it); range and finiteness are
     checked in the kernel, which reports them through ``raise_step_error``."""
-    a = np.asarray(action)
-    if a.dtype.kind not in "fiu":  # no complex, strings, objects or booleans
-        raise ValueError(f"action must be real numbers in [-1, 1], got dtype {a.dtype}: "
-                         f"{action!r}")
+    a = check_action_dtype(action)
     if a.shape != shape:
         check_actions(a, shape)  # raises with the reason
     dest[...] = a.reshape(dest.shape)
+    return a
+
+
+def check_action_dtype(action) -> np.ndarray:
+    """``action`` as an array of real numbers (no complex, strings, objects or booleans)."""
+    a = np.asarray(action)
+    if a.dtype.kind not in "fiu":
+        raise ValueError(f"action must be real numbers in [-1, 1], got dtype {a.dtype}: "
+                         f"{action!r}")
     return a
 
 
@@ -299,21 +308,25 @@ INFO_COLUMNS = {  # info key: column of the env kernel's extras (see _envkernel.
     "slip_work": EK.X_SLIP, "N": EK.X_N, "T": EK.X_T, "stick_fraction": EK.X_STICK,
     "omega_R": EK.X_U, "v": EK.X_V, "saturation": EK.X_SAT,
 }
+_INFO_KEYS = tuple(INFO_COLUMNS)
+_INFO_IDX = np.array(list(INFO_COLUMNS.values()))  # for the batched gather
 
 
 def info_dict(x, target) -> dict:
     """The per-step info of one env from its row of the kernel's extras: the columns of
     ``INFO_COLUMNS`` plus target, error = target - x* and saturated = saturation < 1."""
-    d = {k: float(x[c]) for k, c in INFO_COLUMNS.items()}
-    d["target"] = float(target)
-    d["error"] = float(target - x[EK.X_XS])
-    d["saturated"] = bool(x[EK.X_SAT] < 1.0)
+    row = x.tolist()  # Python floats once; cheaper than a float() per entry
+    d = {k: row[c] for k, c in INFO_COLUMNS.items()}
+    t = float(target)
+    d["target"] = t
+    d["error"] = t - row[EK.X_XS]
+    d["saturated"] = row[EK.X_SAT] < 1.0
     return d
 
 
 def info_arrays(extra, target) -> dict:
     """``info_dict`` of every env as arrays (float64; saturated bool), one entry per env."""
-    d = {k: extra[:, c].copy() for k, c in INFO_COLUMNS.items()}
+    d = dict(zip(_INFO_KEYS, extra[:, _INFO_IDX].T.copy()))  # one gather, rows as views
     d["target"] = np.array(target, dtype=np.float64)
     d["error"] = target - extra[:, EK.X_XS]
     d["saturated"] = extra[:, EK.X_SAT] < 1.0

@@ -74,20 +74,22 @@ def _check_common(delta, eps, w, resolution):
 
 def _impulse_run(delta, eps, w, vstar_ratio, resolution, geo, ticks_per_half, n_sub,
                  grid_offset):
-    """A prescribed-runner drive under the square wave: returns ``next_period()``, which runs
-    one more period and gives its impulse of T normalised as I / (2 G* a1^2 tau)."""
+    """A prescribed-runner drive under the square wave: returns ``run(k)``, which runs k more
+    periods in one kernel call and gives the impulse of T of each, normalised as
+    I / (2 G* a1^2 tau)."""
     wave = SquareWave(delta, eps, w, geo.a1, geo.R, geo.tau)
     drv = _drive(wave, geo, DriveParams(geo.R, geo.E_star, geo.G_star), resolution, grid_offset)
     drv.reset()
-    d, u, v = wave.ticks(1, ticks_per_half)
     dt = wave.dt_tick(ticks_per_half)
     vs = vstar_ratio * wave.omega_R
     unit = 2 * geo.G_star * wave.a1 ** 2 * wave.tau
+    per = 2 * ticks_per_half
 
-    def next_period():
+    def run(k):
+        d, u, v = wave.ticks(k, ticks_per_half)
         out = drv.run(dt_tick=dt, n_sub=n_sub, omega_R=u, v=v, d=d, vstar=vs)
-        return out["impulse"].sum() / unit
-    return next_period
+        return out["impulse"].reshape(k, per).sum(axis=1) / unit
+    return run
 
 
 def period_impulse(delta, eps, w, vstar_ratio, *, resolution=DEFAULT_RESOLUTION, periods=3,
@@ -96,11 +98,9 @@ def period_impulse(delta, eps, w, vstar_ratio, *, resolution=DEFAULT_RESOLUTION,
     (infinite friction), normalised as I / (2 G* a1^2 tau) (paper Fig. 8)."""
     if int(periods) != periods or periods < 1:
         raise ValueError(f"periods must be an integer >= 1, got {periods}")
-    step = _impulse_run(delta, eps, w, vstar_ratio, resolution, geo, ticks_per_half, n_sub,
-                        grid_offset)
-    for _ in range(int(periods)):
-        I = step()
-    return I
+    run = _impulse_run(delta, eps, w, vstar_ratio, resolution, geo, ticks_per_half, n_sub,
+                       grid_offset)
+    return float(run(int(periods))[-1])
 
 
 STEADY_TOL = 1e-12     # periodic steady state: the working point changes less than this per
@@ -112,11 +112,13 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
     """Simulated working point v*/(omega R): the zero of the period impulse (Eq. 31).
 
     With infinite friction and a prescribed runner the impulse is affine in v*, so two runs
-    give the zero exactly.  Both runs go on period by period until the working point of the
-    last period differs from the one before by less than ``STEADY_TOL`` (at least
-    ``periods``, at most ``STEADY_MAX_PERIODS``; for w >= 2 the state is periodic after the
-    first period unless w - 2 and 1 - sqrt(delta) are both below a cell, where the transient
-    decays over many periods).  ``until_steady=False`` runs exactly ``periods`` periods.
+    give the zero exactly.  Both run ``periods`` periods, then (``until_steady``) on period by
+    period until the working point of the last period differs from the one before by less
+    than ``STEADY_TOL`` (at most ``STEADY_MAX_PERIODS``; for w >= 2 the state is periodic
+    after the first period unless w - 2 and 1 - sqrt(delta) are both below a cell, where the
+    start-up transient decays over up to ~20 periods).  Below w = 1 + sqrt(delta) some springs
+    never release and there is no steady state: exactly ``periods`` periods are run and
+    ``steady`` is False.  ``until_steady=False`` runs exactly ``periods`` periods.
     Returns a dict with ``simulated``, ``eq32`` (None for w < 2), ``eq29``, ``rel_error``,
     ``periods`` (run), ``steady`` and ``seconds``, and a ``note`` where the run ended without
     a steady state or where 1 - sqrt(delta) is smaller than two cells (not resolved: relative
@@ -125,21 +127,21 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
     _check_common(delta, eps, w, resolution)
     if int(periods) != periods or not 2 <= periods <= STEADY_MAX_PERIODS:
         raise ValueError(f"periods must be an integer in [2, {STEADY_MAX_PERIODS}], got {periods}")
+    periods = int(periods)
     t0 = time.perf_counter()
     runs = [_impulse_run(delta, eps, w, V, resolution, geo, 1, 1, grid_offset)
             for V in (0.0, 0.1)]
-    sim = prev = math.nan
-    steady = False
-    k = 0
-    while k < STEADY_MAX_PERIODS:
+    releases = w >= 1.0 + math.sqrt(delta)  # else no periodic steady state exists
+    i0, i1 = runs[0](periods), runs[1](periods)
+    sims = list(-0.1 * i0[-2:] / (i1[-2:] - i0[-2:]))
+    k = periods
+    steady = releases and abs(sims[-1] - sims[-2]) <= STEADY_TOL
+    while until_steady and releases and not steady and k < STEADY_MAX_PERIODS:
+        j0, j1 = runs[0](1)[0], runs[1](1)[0]
+        sims.append(-0.1 * j0 / (j1 - j0))
         k += 1
-        i0, i1 = runs[0](), runs[1]()
-        prev, sim = sim, -0.1 * i0 / (i1 - i0)
-        if k >= periods and abs(sim - prev) <= STEADY_TOL:
-            steady = True
-            break
-        if k >= periods and not until_steady:
-            break
+        steady = abs(sims[-1] - sims[-2]) <= STEADY_TOL
+    sim, prev = sims[-1], sims[-2]
     seconds = time.perf_counter() - t0
     eq32 = float(analytic.eq32(delta, eps, w)) if w >= 2 else None
     res = {
@@ -149,27 +151,29 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
         "rel_error": (float(abs(sim - eq32) / abs(eq32)) if eq32 not in (None, 0.0) else None),
         "seconds": seconds,
         "delta": delta, "eps": eps, "w": w, "resolution": resolution, "periods": k,
-        "steady": steady,
+        "steady": bool(steady),
     }
     notes = []
-    if not steady:
-        notes.append(f"no periodic steady state within {k} periods (the working point still "
-                     f"changed by {abs(sim - prev):.1e} in the last)")
+    if not steady and releases:
+        notes.append(f"not periodic after {k} periods (the working point still changed by "
+                     f"{abs(sim - prev):.1e} in the last)")
     gap = 1.0 - math.sqrt(delta)  # a1 - a2 in a1: the back-step contact edge
     if 0.0 < gap < 2.0 / resolution:
-        both = w - 2.0 < 2.0 / resolution
+        need = math.ceil(8.0 / gap)
+        both = eq32 is not None and w - 2.0 < 2.0 / resolution
         notes.append(f"1 - sqrt(delta) = {gap:.3g} a1 spans {gap * resolution:.2g} cells: not "
                      "resolved, the relative error can reach "
                      + ("several times Eq. 32 (w - 2 is below two cells too)" if both
                         else "1% at 64 and 10% at 16 cells per a1")
-                     + f"; about {min(math.ceil(8.0 / gap), 1e5):.0f} cells per a1 resolve it")
+                     + (f"; about {need} cells per a1 resolve it" if need <= 1e5 else
+                        "; it cannot be resolved within the largest resolution (1e5)"))
     if w < 2:
         notes.append("Eq. 32 holds for w >= 2 only; eq32 is null here")
         try:
             res["working_point_ratio"] = float(analytic.working_point_ratio(delta, eps, w))
         except ValueError as e:
             res["working_point_ratio"] = None
-            notes.append(str(e))
+            notes.append(f"{e}; the value is that of the last of {k} periods")
     if notes:
         res["note"] = "; ".join(notes)
     return res

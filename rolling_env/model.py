@@ -325,8 +325,8 @@ N_SUB_MAX = 10**9
 
 def check_n_sub(n_sub) -> int:
     """Sub-steps per tick as an int in [1, N_SUB_MAX] (integral floats accepted)."""
-    ok = (not isinstance(n_sub, (bool, np.bool_)) and isinstance(n_sub, (numbers.Real))
-          and math.isfinite(n_sub) and n_sub == int(n_sub) and 1 <= n_sub <= N_SUB_MAX)
+    ok = (not isinstance(n_sub, (bool, np.bool_)) and isinstance(n_sub, numbers.Real)
+          and 1 <= n_sub <= N_SUB_MAX and n_sub == int(n_sub))  # range first: no overflow
     if not ok:
         raise ValueError(f"n_sub must be an integer in [1, {N_SUB_MAX}], got {n_sub!r}")
     return int(n_sub)

@@ -168,8 +168,8 @@ def validate(scene: Scene) -> Scene:
 def load_scene(scene: str | os.PathLike | dict | Scene = "default", **overrides) -> Scene:
     """Load a scene by name (``configs/scenes/<name>.yaml``), path, dict or Scene, then apply
     keyword overrides.  Every field is required in the file."""
-    if isinstance(scene, Scene):
-        return scene.replace(**overrides) if overrides else scene
+    if isinstance(scene, Scene):  # checked again: a Scene can be built or replaced unchecked
+        scene = dataclasses.asdict(scene)
     if not isinstance(scene, (str, os.PathLike, dict)):
         raise ValueError(f"scene must be a shipped scene name ({', '.join(list_scenes())}), a "
                          f"path to a YAML file, a dict or a Scene, got {scene!r}")
@@ -203,13 +203,19 @@ class _UniqueKeyLoader(yaml.SafeLoader):
     YAML keeps the last value silently, hiding an edit that did not take)."""
 
     def construct_mapping(self, node, deep=False):
-        seen = set()
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=deep)
-            if key in seen:
-                raise yaml.constructor.ConstructorError(
-                    None, None, f"duplicate key {key!r}", key_node.start_mark)
-            seen.add(key)
+        if isinstance(node, yaml.MappingNode):
+            self.flatten_mapping(node)  # merge keys (<<: *anchor) first, as safe_load does
+            seen = set()
+            for key_node, _ in node.value:
+                key = self.construct_object(key_node, deep=deep)
+                try:
+                    dup = key in seen
+                except TypeError:  # an unhashable key: the base class reports it
+                    continue
+                if dup:
+                    raise yaml.constructor.ConstructorError(
+                        None, None, f"duplicate key {key!r}", key_node.start_mark)
+                seen.add(key)
         return super().construct_mapping(node, deep=deep)
 
 

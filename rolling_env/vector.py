@@ -19,6 +19,7 @@ is faster on one thread too) and the rest the second core.
 from __future__ import annotations
 
 import numbers
+from collections.abc import Mapping
 
 import numpy as np
 from gymnasium import spaces
@@ -26,8 +27,8 @@ from gymnasium.utils import seeding
 
 from . import _envkernel as EK
 from . import _kernel as K
-from .env import (OBS_NAMES, build_drive, check_time_limit, info_arrays, info_dict,
-                  load_actions, raise_step_error, sample_target, target_option)
+from .env import (OBS_NAMES, build_drive, check_action_dtype, check_time_limit, info_arrays,
+                  info_dict, load_actions, raise_step_error, sample_target, target_option)
 from .scenes import load_scene
 
 PARALLEL_MIN_ENVS = 4
@@ -98,13 +99,9 @@ class BatchCore:
     def reset(self, mask=None, options=None) -> None:
         """Reset the envs where ``mask`` is True (all when None).  ``options``: one dict for
         every env, or a sequence of num_envs dicts (or None), one per env."""
-        per_env = isinstance(options, (list, tuple, np.ndarray))
-        if per_env and len(options) != self.num_envs:
-            raise ValueError(f"options must be a dict or a sequence of num_envs = "
-                             f"{self.num_envs} dicts, got {len(options)}")
         idx = range(self.num_envs) if mask is None else np.flatnonzero(mask)
         # every env's options checked before any env changes: a bad one resets nothing
-        given = [target_option(self.scene, options[i] if per_env else options) for i in idx]
+        given = self.check_options(options, idx)
         for i, g in zip(idx, given):
             self.target[i] = sample_target(self.scene, self.rngs[i], g)
             self.U[i] = 0.0
@@ -113,6 +110,17 @@ class BatchCore:
             self.extra[i] = 0.0
             self.extra[i, EK.X_SAT] = 1.0
             EK.reset_obs(i, self.sv, self.target, self.obs)
+
+    def check_options(self, options, idx=None) -> list:
+        """The target each env of ``idx`` (default all) asks for (None: draw one), checked:
+        ``options`` is None, one dict for every env or a sequence of num_envs dicts (or
+        None).  Raises before anything changes."""
+        per_env = isinstance(options, (list, tuple, np.ndarray))
+        if per_env and len(options) != self.num_envs:
+            raise ValueError(f"options must be a dict or a sequence of num_envs = "
+                             f"{self.num_envs} dicts, got {len(options)}")
+        idx = range(self.num_envs) if idx is None else idx
+        return [target_option(self.scene, options[i] if per_env else options) for i in idx]
 
     def step(self, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Advance every env one tick; returns (obs float32, rewards, truncated)."""
@@ -162,19 +170,42 @@ class RollingDriveVectorEnv(_gym_vector_base()):
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._autoreset = np.zeros(self.num_envs, dtype=bool)
-        self._act = np.zeros((self.num_envs, 3))
 
     def reset(self, *, seed=None, options=None):
+        """Reset every env, or with ``options={"reset_mask": m}`` (a bool array, one entry per
+        env, as Gymnasium's own vector envs take it) only those where m is True: seeds apply
+        to them only, and the infos' ``_key`` masks are m.  Seeds and options are checked
+        before anything changes."""
+        mask = None
+        if isinstance(options, Mapping) and "reset_mask" in options:
+            options = dict(options)  # the caller's dict is left as it was
+            mask = self._reset_mask(options.pop("reset_mask"))
+            options = options or None
+        self.core.check_options(options, None if mask is None else np.flatnonzero(mask))
         if seed is not None:
+            if mask is not None:
+                if isinstance(seed, np.ndarray) and seed.ndim == 0:
+                    seed = seed.item()
+                if isinstance(seed, numbers.Integral) and not isinstance(seed, (bool, np.bool_)):
+                    seed = [int(seed) + i for i in range(self.num_envs)]
+                if isinstance(seed, (list, tuple, np.ndarray)) and len(seed) == self.num_envs:
+                    seed = [s if m else None for s, m in zip(seed, mask)]
             self.core.seed(seed)  # int: env i gets seed + i; or one seed (or None) per env
             if isinstance(seed, numbers.Integral):
                 self.action_space.seed(int(seed))
-        self.core.reset(None, options)
-        self._autoreset[:] = False
-        return self.core.obs.copy(), self._infos()
+        self.core.reset(mask, options)
+        self._autoreset[slice(None) if mask is None else mask] = False
+        return self.core.obs.copy(), self._infos(mask)
+
+    def _reset_mask(self, m) -> np.ndarray:
+        if not (isinstance(m, np.ndarray) and m.dtype == np.bool_ and m.shape == (self.num_envs,)
+                and m.any()):
+            raise ValueError(f"options['reset_mask'] must be a numpy bool array of shape "
+                             f"({self.num_envs},) with at least one True, got {m!r}")
+        return m.copy()
 
     def step(self, actions):
-        actions = load_actions(actions, (self.num_envs, 3), self._act)  # checked like the env
+        actions = check_action_dtype(actions)  # the rest is checked by core.step
         was_done = self._autoreset.copy()
         obs, rew, trunc = self.core.step(np.where(was_done[:, None], 0.0, actions)
                                          if was_done.any() else actions)
@@ -188,12 +219,17 @@ class RollingDriveVectorEnv(_gym_vector_base()):
         self._autoreset = trunc | term
         return obs, rew, term, trunc, self._infos()
 
-    def _infos(self) -> dict:
+    def _infos(self, mask=None) -> dict:
         """The single env's info keys as arrays with Gymnasium's ``_key`` masks (every env
-        reports each key; an env reset this step reports its reset info, as in "sync")."""
+        reports each key, or those of ``mask``; an env reset this step reports its reset info,
+        as in "sync")."""
         d = info_arrays(self.core.extra, self.core.target)
-        for k in list(d):
-            d["_" + k] = np.ones(self.num_envs, dtype=bool)
+        masks = np.ones((len(d), self.num_envs), dtype=bool)  # one allocation, rows as views
+        if mask is not None:
+            masks[:] = mask
+            for v in d.values():
+                v[~mask] = 0  # Gymnasium's fill for envs without info
+        d.update(zip(["_" + k for k in d], masks))
         return d
 
 
@@ -222,8 +258,10 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
         self._actions = None
 
     def reset(self):
+        options = [o or None for o in self._options]
+        self.core.check_options(options)  # before the seeds change anything
         self.core.seed(list(self._seeds))
-        self.core.reset(None, [o or None for o in self._options])
+        self.core.reset(None, options)
         self._reset_seeds()
         self._reset_options()
         self.reset_infos = [self.core.info(i) for i in range(self.num_envs)]
@@ -251,8 +289,9 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
 
     # Attributes and methods live on the batch (``BatchCore``).  Its per-env state
     # (``BatchCore.PER_ENV``: ``target``, ``steps``, ``rngs``, ...) is read and written per
-    # index; anything else is shared by the batch: read for every index, written only for
-    # all envs at once.
+    # index; anything else is shared by the batch and read for every index; of the shared
+    # attributes only ``SHARED_WRITABLE`` can be written, for all envs at once (the scene,
+    # its kernel constants and the batch size are fixed at construction).
     SHARED_WRITABLE = frozenset({"max_episode_steps"})
 
     def _per_env(self, attr_name) -> bool:
@@ -275,6 +314,8 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
         idx = list(self._get_indices(indices))
         if attr_name == "max_episode_steps":
             value = check_time_limit(value, self.core.scene)
+        elif attr_name == "target":  # the same check as reset(options={"target": ...})
+            value = target_option(self.core.scene, {"target": value})
         if self._per_env(attr_name):
             target = getattr(self.core, attr_name)
             if isinstance(target, list):

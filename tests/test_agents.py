@@ -202,8 +202,24 @@ def test_train_refuses_a_used_run_folder(tmp_path, capsys):
     assert train_main(argv) == 2
     assert "already exists and is not empty" in capsys.readouterr().err
     assert (run / "checkpoint.zip").read_text() == "earlier run", "the earlier run was touched"
+    assert train_main(argv + ["--overwrite"]) == 2  # no config.yml: not a run of this script
+    assert "nothing was deleted" in capsys.readouterr().err
+    assert (run / "checkpoint.zip").read_text() == "earlier run"
+    (run / "config.yml").write_text("algo: ppo\n")
     assert train_main(argv + ["--overwrite"]) == 0
     assert not (run / "checkpoint.zip").exists() and (run / "model.zip").exists()
+    (run / "notes.txt").write_text("keep me")
+    assert train_main(argv + ["--overwrite"]) == 2, "a folder with foreign files was replaced"
+    assert "holds files a run does not write (notes.txt)" in capsys.readouterr().err
+    assert (run / "notes.txt").read_text() == "keep me"
+    parent = ["--run-dir", str(tmp_path)]
+    os.chdir(run)
+    try:
+        assert train_main(argv[:2] + parent + argv[4:] + ["--overwrite"]) == 2
+        assert "one of its parents" in capsys.readouterr().err
+    finally:
+        os.chdir(REPO)
+    assert (run / "notes.txt").exists()
 
 
 def test_goal_verdicts():
@@ -218,16 +234,17 @@ def test_goal_verdicts():
     assert not v["sac_seed0"]["met"], "more slip work than the baseline is not the goal"
 
 
-def test_interrupted_training_leaves_loadable_checkpoint(tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_interrupted_training_leaves_loadable_checkpoint(tmp_path, sig):
     proc = subprocess.Popen(_train(tmp_path, timesteps=10 ** 7), cwd=REPO,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     run = tmp_path / "run"
     deadline = time.time() + 120
     while not (run / "evaluations.npz").exists() and time.time() < deadline:
         time.sleep(0.5)
-    proc.send_signal(signal.SIGTERM)
+    proc.send_signal(sig)
     proc.wait(timeout=120)
-    assert proc.returncode == 128 + signal.SIGTERM, "an interrupted run must not exit 0"
+    assert proc.returncode == 128 + sig, "an interrupted run must exit 128 + signal, not 0"
     meta = json.loads((run / "meta.json").read_text())
     assert meta["interrupted"] and (run / "checkpoint.zip").exists()
     env = rolling_env.make("default")
@@ -450,21 +467,34 @@ def test_evaluate_refuses_runs_not_trained_on_the_scene(trained_run, tmp_path, c
     assert not [p for p in out.rglob("*") if p.is_file()], "files written before the check"
 
 
-def test_mismatched_model_and_statistics_are_refused(trained_run, tmp_path):
+def test_mismatched_model_and_statistics_are_refused(trained_run, tmp_path, capsys):
     """A model and VecNormalize statistics saved at different steps (a kill between the two
-    writes of save_model) are refused by load_agent, naming both files."""
+    writes of save_model) are refused by load_agent, naming both files; evaluate then falls
+    back to the run's next model, with a warning."""
     import shutil
 
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
     from agents.common import SAVED_AT
+    from agents.evaluate import controllers_for
     scene, runs = trained_run
-    run = tmp_path / "run"
+    run = tmp_path / "runs" / "myscene" / "ppo_seed0"
     shutil.copytree(runs / "myscene" / "ppo_seed0", run)
+    for f in run.glob("best_model*"):
+        f.unlink()
     env = rolling_env.make(str(scene))
     load_agent(run / "model.zip", env)  # a consistent pair loads
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+    shutil.copy(run / "model.zip", run / "checkpoint.zip")  # a consistent fallback
+    shutil.copy(run / "model_vecnormalize.pkl", run / "checkpoint_vecnormalize.pkl")
     stats = run / "model_vecnormalize.pkl"
     vn = VecNormalize.load(str(stats), DummyVecEnv([lambda: rolling_env.make(str(scene))]))
     setattr(vn, SAVED_AT, getattr(vn, SAVED_AT) + 1)  # as if saved one step later
     vn.save(str(stats))
     with pytest.raises(ValueError, match="model_vecnormalize.pkl was saved at step"):
         load_agent(run / "model.zip", env)
+    ctrls = controllers_for(str(scene), tmp_path / "runs", env)
+    assert ctrls["ppo_seed0"].file == "checkpoint.zip"
+    assert "trying checkpoint.zip" in capsys.readouterr().err
+    (run / "checkpoint.zip").unlink()
+    with pytest.raises(ValueError, match="model_vecnormalize.pkl was saved at step"):
+        controllers_for(str(scene), tmp_path / "runs", env)  # nothing left to fall back to

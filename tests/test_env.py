@@ -198,14 +198,14 @@ def test_scene_range_corners_build_and_stay_finite():
     keys = sorted(k for k, v in _SPEC.items() if v[0] is float)
     rng = np.random.default_rng(11)
     built = 0
-    for trial in range(60):
+    for trial in range(80):
         ov = {}
         for k in rng.choice(keys, size=rng.integers(1, 6), replace=False):
             _, lo, hi, _, _ = _SPEC[str(k)]
-            hi = min(hi, 1e6)
             pick = rng.integers(0, 3)
+            top = hi if math.isfinite(hi) else 1e6  # inf (mu) itself is drawn as an end
             ov[str(k)] = (lo if pick == 0 else hi if pick == 1 else
-                          float(math.exp(rng.uniform(math.log(max(lo, 1e-300)), math.log(hi)))))
+                          float(math.exp(rng.uniform(math.log(max(lo, 1e-300)), math.log(top)))))
         ov["sub_steps"] = int(rng.choice([1, 2, 8]))
         ov["resolution"] = float(rng.choice([1.0, 16.0]))
         try:
@@ -220,7 +220,7 @@ def test_scene_range_corners_build_and_stay_finite():
             vals = [r] + [v for v in info.values() if isinstance(v, float)]
             assert np.all(np.isfinite(obs)) and all(math.isfinite(v) for v in vals), (
                 f"non-finite output at step {t} with overrides {ov}")
-    assert built >= 20, f"only {built} of 60 corner scenes were valid: the sample tests little"
+    assert built >= 20, f"only {built} of 80 corner scenes were valid: the sample tests little"
 
 
 @pytest.mark.parametrize("key,value", [("period", 1e-200), ("G_star", 1e-300), ("N_max", 1e-320),
@@ -229,6 +229,15 @@ def test_scene_range_corners_build_and_stay_finite():
 def test_scene_values_whose_scales_underflow_are_rejected(key, value):
     with pytest.raises(ValueError, match=f"scene key '{key}' must be in"):
         gym.make("RollingDrive-v0", **{key: value})
+
+
+def test_scene_objects_are_checked_too():
+    """A Scene built or replaced with dataclasses (bypassing Scene.replace) is checked like a
+    file (period = 1e-200 crashed with ZeroDivisionError)."""
+    import dataclasses
+    bad = dataclasses.replace(load_scene("default"), period=1e-200)
+    with pytest.raises(ValueError, match="scene key 'period' must be in"):
+        gym.make("RollingDrive-v0", scene=bad)
 
 
 def test_scene_elastic_constants_ratio_checked():
@@ -293,6 +302,14 @@ def test_scene_file_errors_name_the_file(tmp_path):
     dup.write_text(text + "mu: 0.5\n")
     with pytest.raises(ValueError, match="duplicate key 'mu'"):
         load_scene(dup)
+    merged = tmp_path / "merged.yaml"  # YAML merge keys work as with yaml.safe_load
+    merged.write_text(text.replace("w_wear: 0.5", "w_wear: 0.5\nx: &a {p: 1}\ny: {<<: *a}"))
+    with pytest.raises(ValueError, match="unknown scene key 'x'"):
+        load_scene(merged)
+    unhashable = tmp_path / "unhashable.yaml"
+    unhashable.write_text("? [1, 2]\n: 3\n" + text)
+    with pytest.raises(ValueError, match="unhashable.yaml' is not valid YAML"):
+        load_scene(unhashable)
     ok = tmp_path / "ok.yaml"
     ok.write_text(text)
     assert load_scene(ok) == load_scene("default").replace(name="default"), (
@@ -398,6 +415,7 @@ def test_vanishing_runner_mass_tends_to_massless():
     ({"target": True}, r"options\['target'\] must be a number"),
     ({"target": float("nan")}, "finite displacement"),
     ({"targte": 1e-7}, r"unknown key\(s\) \['targte'\]"),
+    ({"target": "3e-7"}, r"options\['target'\] must be a number"),
     ([{"target": 1e-7}], "options must be a dict"),
 ])
 def test_reset_target_option_checked_before_anything_changes(options, match):
@@ -410,6 +428,9 @@ def test_reset_target_option_checked_before_anything_changes(options, match):
     with pytest.raises(ValueError, match=match):
         env.reset(seed=2, options=options)
     assert env.unwrapped.np_random.bit_generator.state == state
+    from types import MappingProxyType
+    env.reset(options=MappingProxyType({"target": np.array(3e-7)}))  # any mapping, 0-d arrays
+    assert env.unwrapped.target == 3e-7
     edge = -10 * env.unwrapped.scene.target_max  # OBS_BOUND x target_max: still allowed
     obs, _ = env.reset(options={"target": edge})
     assert obs[0] == -10.0 and env.unwrapped.target == edge

@@ -275,6 +275,14 @@ def test_working_point_runs_to_periodic_steady_state():
     assert fixed["periods"] == 3 and not fixed["steady"] and fixed["rel_error"] > 1e-2, f"{fixed}"
 
 
+def test_working_point_without_a_steady_state_runs_the_given_periods():
+    """Below w = 1 + sqrt(delta) some springs never release: exactly ``periods`` periods are
+    run (not 2000 looking for a steady state that does not exist), steady is False."""
+    r = ex.working_point(0.9, 0.1, 1.5)
+    assert r["periods"] == 3 and not r["steady"] and "no steady working point" in r["note"]
+    assert ex.working_point(0.9, 0.1, 1.5, periods=10)["periods"] == 10
+
+
 def test_working_point_notes_an_unresolved_back_step_edge():
     """1 - sqrt(delta) below two cells: the result carries a note with the resolution that
     resolves it; a resolved case has none."""

@@ -219,13 +219,26 @@ def test_gymnasium_vector_infos_match_sync_mode():
     kw = dict(num_envs=3, episode_steps=6)
     ours = gym.make_vec("RollingDrive-v0", vectorization_mode="vector_entry_point", **kw)
     sync = gym.make_vec("RollingDrive-v0", vectorization_mode="sync", **kw)
-    infos = [ours.reset(seed=3)[1], sync.reset(seed=3)[1]]
-    for acts in _actions(2, n=3, steps=14):
-        infos = [ours.step(acts)[4], sync.step(acts)[4]]
-        a, b = infos
-        assert set(a) == set(b), f"keys differ: {set(a) ^ set(b)}"
+    def same(a, b, when):
+        assert set(a) == set(b), f"{when}: keys differ: {set(a) ^ set(b)}"
         for k in b:
-            assert a[k].dtype == b[k].dtype and np.array_equal(a[k], b[k]), f"info[{k!r}] differs"
+            assert a[k].dtype == b[k].dtype and np.array_equal(a[k], b[k]), (
+                f"{when}: info[{k!r}] differs: {a[k]} vs {b[k]}")
+    same(ours.reset(seed=3)[1], sync.reset(seed=3)[1], "reset")
+    for t, acts in enumerate(_actions(2, n=3, steps=14)):
+        (o1, *_, a), (o2, *_, b) = ours.step(acts), sync.step(acts)
+        assert np.array_equal(o1, o2)
+        same(a, b, f"step {t}")
+    mask = np.array([False, True, False])  # Gymnasium's partial reset
+    (o1, a), (o2, b) = (ours.reset(seed=11, options={"reset_mask": mask.copy()}),
+                        sync.reset(seed=11, options={"reset_mask": mask.copy()}))
+    assert np.array_equal(o1, o2), "partial reset: observations differ"
+    same(a, b, "partial reset")
+    for t, acts in enumerate(_actions(4, n=3, steps=8)):
+        (o1, *_, a), (o2, *_, b) = ours.step(acts), sync.step(acts)
+        assert np.array_equal(o1, o2), f"after the partial reset, step {t}: obs differ"
+    with pytest.raises(ValueError, match=r"options\['reset_mask'\] must be a numpy bool array"):
+        ours.reset(options={"reset_mask": [True, False, False]})
 
 
 def test_gymnasium_vector_env_checks_action_types():
@@ -246,10 +259,22 @@ def test_batch_reset_with_a_bad_option_changes_nothing():
         venv.step(np.zeros((3, 3)))
     core = venv.unwrapped.core
     state = (core.steps.copy(), core.target.copy(), core.st.copy())
-    for bad in ([{"target": 1e-7}, {"target": "x"}, None], [{"target": 1e-7}, {"targte": 1}, None]):
+    rngs = [r.bit_generator.state for r in core.rngs]
+    for bad in ([{"target": 1e-7}, {"target": "x"}, None], [{"target": 1e-7}, {"targte": 1}, None],
+                {"target": 1.0}):
         with pytest.raises(ValueError, match="options"):
-            venv.reset(options=bad)
+            venv.reset(seed=5, options=bad)
         assert all(np.array_equal(x, y) for x, y in zip(state, (core.steps, core.target, core.st)))
+        assert [r.bit_generator.state for r in core.rngs] == rngs, "reseeded before the check"
+
+
+def test_sb3_set_attr_target_checked():
+    v = RollingDriveVecEnv(2)
+    for bad in (1.0, float("nan")):
+        with pytest.raises(ValueError, match=r"options\['target'\]"):
+            v.set_attr("target", bad, indices=[0])
+    v.set_attr("target", np.float32(2e-7), indices=[0])
+    assert v.core.target[0] == np.float32(2e-7)
 
 
 @pytest.mark.parametrize("bad", [None, True, 2.0, 0])

@@ -69,15 +69,13 @@ def _working_point(args):
     if r["eq32"] is None:
         wpr = r.get("working_point_ratio")
         human = (f"v*/(omega R) simulated {r['simulated']:.6f}  (w < 2: Eq. 32 does not apply; "
-                 + (f"corrected formula {wpr:.6f})" if wpr is not None else
-                    "below w = 1 + sqrt(delta) some springs never release: no steady working "
-                    "point, the number is the last periods' value)")
+                 + (f"corrected formula {wpr:.6f})" if wpr is not None else "no steady state)")
                  + f"  [{r['seconds']:.3f} s]")
     else:
         rel = "n/a (Eq. 32 is 0)" if r["rel_error"] is None else f"{r['rel_error']:.2e}"
         human = (f"v*/(omega R) simulated {r['simulated']:.6f}  Eq. 32 {r['eq32']:.6f}  "
                  f"Eq. 29 {r['eq29']:.6f}  rel. error {rel}  [{r['seconds']:.3f} s]")
-    if r["eq32"] is not None and r.get("note"):
+    if r.get("note"):
         human += f"\nnote: {r['note']}"
     emit(r, args.json, human)
     return 0

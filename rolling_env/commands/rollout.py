@@ -27,7 +27,14 @@ def _run(args):
     import rolling_env
     from ..rollout import make_controller, plot, rollout, write_csv
 
+    from ..env import target_option
+
     env = rolling_env.make(args.scene, render_mode="rgb_array" if args.frame else None)
+    asked = None if args.target is None else {"target": args.target}
+    try:  # the scene's target range, named as the argument the user gave
+        target_option(env.unwrapped.scene, asked)
+    except ValueError as e:
+        raise ValueError(str(e).replace("options['target']", "--target")) from None
     ctrl = make_controller(args.controller, env, seed=args.seed)
     data = rollout(env, ctrl, seed=args.seed, target=args.target)
     stem = f"{env.unwrapped.scene.name}_{Path(args.controller).stem}_seed{args.seed}"
