@@ -3,8 +3,9 @@
     python -m agents.evaluate --scenes default resonant ... --runs runs/ --episodes 20
 
 Controllers: the two Eq. 32 baselines and every trained agent under ``<runs>/<scene>/*/``
-(``agent_file``: EvalCallback's best model when its VecNormalize statistics were saved with
-it, else the final model, with the statistics saved beside it).  Writes ``results/comparison.md`` and ``results/comparison.csv``
+(``agent_files``: EvalCallback's best model when its VecNormalize statistics were saved with
+it, else the final model, else the checkpoint, with the statistics saved beside it; a model
+whose statistics were saved at another step is skipped with a warning for the next one).  Writes ``results/comparison.md`` and ``results/comparison.csv``
 (atomically) and plots under ``results/plots/``: learning curves per scene and one trajectory
 per controller on the same target.
 """

@@ -8,7 +8,8 @@ meta.json (seed, package versions, env steps, wall time), the TensorBoard log (t
 EvalCallback log (evaluations.npz) and best model, periodic checkpoints, and the final
 model.zip with model_vecnormalize.pkl beside it.  Every file is written atomically; Ctrl-C or
 SIGTERM saves a final checkpoint before exiting with 130 / 143 (128 + the signal).  A run
-folder that already holds files is refused (``--overwrite`` replaces it); there is no resume:
+folder that already holds files is refused (``--overwrite`` replaces it, if it is a folder
+this script created and holds only the files it writes); there is no resume:
 a stopped run keeps its checkpoint.zip, and a new run starts from scratch in another folder.
 """
 from __future__ import annotations
@@ -54,8 +55,8 @@ def build_parser():
     p.add_argument("--run-dir", default=None, help="run folder (default runs/<scene>/<algo>_seed<seed>); "
                    "a folder that already holds files is refused unless --overwrite")
     p.add_argument("--overwrite", action="store_true",
-                   help="replace an existing run folder (its files are deleted once the new "
-                   "model is built)")
+                   help="replace an existing run folder created by this script and holding "
+                   "only its files (deleted once the new model is built)")
     p.add_argument("--eval-freq", type=positive_int("eval-freq", 1, 10**12), default=10000,
                    help="env steps between evaluations")
     p.add_argument("--eval-episodes", type=positive_int("eval-episodes", 1, 10**6), default=5)
@@ -137,7 +138,8 @@ def _setup(args):
     env = make_vec_env(scene, n_envs, args.seed, env_kwargs)
     eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs)
     run = Path(args.run_dir or f"runs/{scene_key(scene)}/{args.algo}_seed{args.seed}")
-    if run.exists() and (not run.is_dir() or any(run.iterdir())):
+    replace = False
+    if run.is_symlink() or (run.exists() and (not run.is_dir() or any(run.iterdir()))):
         # a second run into the same folder would mix its files with the first's (and its
         # first checkpoint would overwrite an interrupted run's): refuse, keep what is there
         if not args.overwrite:
@@ -147,6 +149,7 @@ def _setup(args):
         if why:
             raise UsageError(f"--overwrite replaces only a run folder written by this script; "
                              f"{str(run)!r} {why}: nothing was deleted")
+        replace = True
     norm = parse_kwargs(hp.get("normalize", False))
     if norm is not None:
         env = VecNormalize(env, gamma=float(hp.get("gamma", 0.99)), **norm)
@@ -160,9 +163,11 @@ def _setup(args):
     model = cls(hp.get("policy", "MlpPolicy"), env, seed=args.seed, verbose=0, device="cpu",
                 tensorboard_log=str(run / "tb"),
                 policy_kwargs=parse_kwargs(hp.get("policy_kwargs")), **kwargs)
-    if args.overwrite and run.exists():
-        shutil.rmtree(run) if run.is_dir() else run.unlink()
+    if replace:  # checked by _not_a_run above; an empty folder is simply used
+        shutil.rmtree(run)
     run.mkdir(parents=True, exist_ok=True)
+    atomic_write(run / RUN_MARKER, lambda p: Path(p).write_text(
+        "a run folder of agents.train: --overwrite may replace it\n"))
     cfg = dict(hp, n_envs=n_envs, n_timesteps=n_timesteps, algo=args.algo, scene=scene,
                seed=args.seed)
     atomic_write(run / "config.yml", lambda p: Path(p).write_text(yaml.safe_dump(cfg)))
@@ -170,25 +175,41 @@ def _setup(args):
     return model, eval_env, run, n_envs, n_timesteps
 
 
-RUN_FILES = re.compile(r"^(config\.yml|command\.txt|meta\.json|evaluations\.npz|tb|"
-                       r"(model|best_model|checkpoint)(\.zip|_vecnormalize\.pkl))$")
+RUN_MARKER = ".rolling-drive-run"  # written when the script creates a run folder
+RUN_FILES = re.compile(  # what the script (and SB3's TensorBoard logger) writes in a run folder
+    r"^(config\.yml|command\.txt|meta\.json|evaluations\.npz|tb|\.eval_scratch|"
+    + re.escape(RUN_MARKER) + r"|(model|best_model|checkpoint)(\.zip|_vecnormalize\.pkl)|"
+    r"\.(config|command|meta|evaluations|model|best_model|checkpoint)(_vecnormalize)?\.[^/]+"
+    r"\.(yml|txt|json|npz|zip|pkl))$")  # the last line: atomic writes' temporary files
+TB_FILES = re.compile(r"^(ppo|sac|td3)_\d+(/events\.out\.tfevents\.[^/]+)?$")
+SCRATCH_FILES = re.compile(r"^evaluations\.npz$")
 
 
 def _not_a_run(run: Path) -> str:
-    """Why ``run`` is not a folder that --overwrite may delete ('' if it is one): a folder of
-    this script's files only (config.yml or meta.json among them, plus models, statistics,
-    logs and the leftovers of atomic writes), not the working folder, one of its parents or
-    the home folder."""
+    """Why ``run`` is not a folder that --overwrite may delete ('' if it is one): a real
+    folder (no symlink) that this script created (``RUN_MARKER``), holding only the files it
+    writes (``RUN_FILES``; TensorBoard logs under tb/, the evaluation scratch folder), and
+    not the working folder, one of its parents or the home folder."""
     here = Path.cwd().resolve()
+    if run.is_symlink():
+        return "is a symbolic link"
     target = run.resolve()
     if target == here or target in here.parents or target == Path.home().resolve():
         return "is the working folder, one of its parents or the home folder"
     if not run.is_dir():
         return "is not a folder"
-    names = [p.name for p in run.iterdir()]
-    if not {"config.yml", "meta.json"} & set(names):
-        return "has no config.yml or meta.json"
-    other = [n for n in names if not (RUN_FILES.match(n) or n.startswith("."))]
+    if not (run / RUN_MARKER).is_file():
+        return (f"has no {RUN_MARKER} marker (only folders this script created can be "
+                "replaced; delete an older run folder by hand)")
+    other = []
+    for p in run.rglob("*"):
+        rel = p.relative_to(run)
+        top, sub = rel.parts[0], "/".join(rel.parts[1:])
+        ok = (not p.is_symlink() and RUN_FILES.match(top) is not None
+              and (not sub or (top == "tb" and TB_FILES.match(sub) is not None)
+                   or (top == ".eval_scratch" and SCRATCH_FILES.match(sub) is not None)))
+        if not ok:
+            other.append(str(rel))
     if other:
         return f"holds files a run does not write ({', '.join(sorted(other)[:5])})"
     return ""

@@ -151,15 +151,15 @@ def impulse_coefficients(delta, w):
     For 1 + sqrt(delta) <= w < 2 not every forth-step spring is released before the step
     reverses and C1 gains k = (2 - w)^3 / 6, so P and Q both gain k.  This branch is taken from
     physics.md, not from the paper; it is checked against the simulation in
-    tests/test_physics.py.  Below w = 1 + sqrt(delta) some springs never release and there is
-    no steady working point: ValueError.
+    tests/test_physics.py.  Below w = 1 + sqrt(delta) some springs never release and the
+    formula does not apply: ValueError.
     """
     delta, w = _arr("delta", delta, 0, 1), _w(w)
     low = w < 1 + np.sqrt(delta)
     if np.any(low):
         raise ValueError(f"w must be >= 1 + sqrt(delta), got w = {_first(w, low)!r} at "
                          f"delta = {_first(delta, low)!r}: below, some springs never release "
-                         "and there is no steady working point")
+                         "and the formula does not apply")
     k = np.maximum(2 - w, 0.0) ** 3 / 6
     P = 2 * w * (1 - delta) - 4 / 3 * (1 - delta ** 1.5) + k
     Q = 2 * w * (1 + delta) - 4 / 3 + 4 * delta + k

@@ -116,9 +116,9 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
     period until the working point of the last period differs from the one before by less
     than ``STEADY_TOL`` (at most ``STEADY_MAX_PERIODS``; for w >= 2 the state is periodic
     after the first period unless w - 2 and 1 - sqrt(delta) are both below a cell, where the
-    start-up transient decays over up to ~20 periods).  Below w = 1 + sqrt(delta) some springs
-    never release and there is no steady state: exactly ``periods`` periods are run and
-    ``steady`` is False.  ``until_steady=False`` runs exactly ``periods`` periods.
+    start-up transient decays over up to ~20 periods; below w = 1 + sqrt(delta), where some
+    springs never release, the state can become periodic or not at all).  ``until_steady=False``
+    runs exactly ``periods`` periods.
     Returns a dict with ``simulated``, ``eq32`` (None for w < 2), ``eq29``, ``rel_error``,
     ``periods`` (run), ``steady`` and ``seconds``, and a ``note`` where the run ended without
     a steady state or where 1 - sqrt(delta) is smaller than two cells (not resolved: relative
@@ -131,17 +131,27 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
     t0 = time.perf_counter()
     runs = [_impulse_run(delta, eps, w, V, resolution, geo, 1, 1, grid_offset)
             for V in (0.0, 0.1)]
-    releases = w >= 1.0 + math.sqrt(delta)  # else no periodic steady state exists
     i0, i1 = runs[0](periods), runs[1](periods)
-    sims = list(-0.1 * i0[-2:] / (i1[-2:] - i0[-2:]))
+    sims = -0.1 * i0 / (i1 - i0)  # the working point of each period so far
     k = periods
-    steady = releases and abs(sims[-1] - sims[-2]) <= STEADY_TOL
-    while until_steady and releases and not steady and k < STEADY_MAX_PERIODS:
-        j0, j1 = runs[0](1)[0], runs[1](1)[0]
-        sims.append(-0.1 * j0 / (j1 - j0))
-        k += 1
-        steady = abs(sims[-1] - sims[-2]) <= STEADY_TOL
-    sim, prev = sims[-1], sims[-2]
+    steady = abs(sims[-1] - sims[-2]) <= STEADY_TOL
+    chunk = 8
+    while until_steady and not steady and k < STEADY_MAX_PERIODS:
+        # further periods in growing chunks (one kernel call each), stopping at the first
+        # period whose working point repeats the one before
+        c = min(chunk, STEADY_MAX_PERIODS - k)
+        j0, j1 = runs[0](c), runs[1](c)
+        more = np.concatenate([sims[-1:], -0.1 * j0 / (j1 - j0)])
+        hit = np.flatnonzero(np.abs(np.diff(more)) <= STEADY_TOL)
+        if hit.size:
+            sims = np.concatenate([sims, more[1:hit[0] + 2]])
+            k += hit[0] + 1
+            steady = True
+        else:
+            sims = np.concatenate([sims, more[1:]])
+            k += c
+        chunk = min(2 * chunk, 256)
+    sim, prev = float(sims[-1]), float(sims[-2])
     seconds = time.perf_counter() - t0
     eq32 = float(analytic.eq32(delta, eps, w)) if w >= 2 else None
     res = {
@@ -154,9 +164,10 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
         "steady": bool(steady),
     }
     notes = []
-    if not steady and releases:
-        notes.append(f"not periodic after {k} periods (the working point still changed by "
-                     f"{abs(sim - prev):.1e} in the last)")
+    if not steady:
+        notes.append(f"not periodic after {k} periods: the value is the last period's and "
+                     f"still changed by {abs(sim - prev):.1e} in it"
+                     + ("" if until_steady else " (until_steady=False)"))
     gap = 1.0 - math.sqrt(delta)  # a1 - a2 in a1: the back-step contact edge
     if 0.0 < gap < 2.0 / resolution:
         need = math.ceil(8.0 / gap)
@@ -173,7 +184,7 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
             res["working_point_ratio"] = float(analytic.working_point_ratio(delta, eps, w))
         except ValueError as e:
             res["working_point_ratio"] = None
-            notes.append(f"{e}; the value is that of the last of {k} periods")
+            notes.append(str(e))
     if notes:
         res["note"] = "; ".join(notes)
     return res

@@ -204,9 +204,10 @@ class _UniqueKeyLoader(yaml.SafeLoader):
 
     def construct_mapping(self, node, deep=False):
         if isinstance(node, yaml.MappingNode):
-            self.flatten_mapping(node)  # merge keys (<<: *anchor) first, as safe_load does
             seen = set()
             for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue  # merged keys may be overridden, as with safe_load
                 key = self.construct_object(key_node, deep=deep)
                 try:
                     dup = key in seen

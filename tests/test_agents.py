@@ -191,35 +191,54 @@ def test_short_training_run_saves_loadable_model(tmp_path):
 
 def test_train_refuses_a_used_run_folder(tmp_path, capsys):
     """A second run into a folder that holds a run is refused before anything is written (it
-    mixed its files with the first's and overwrote an interrupted run's checkpoint);
-    --overwrite replaces the folder."""
+    mixed its files with the first's and overwrote an interrupted run's checkpoint).
+    --overwrite replaces only a folder this script created (marker) holding only its files:
+    never one with foreign, hidden or extra TensorBoard files, a symlink, or the working
+    folder's parents (it once deleted whatever --run-dir named)."""
+    import shutil
+
+    from agents.train import RUN_MARKER
     from agents.train import main as train_main
     run = tmp_path / "run"
     run.mkdir()
-    (run / "checkpoint.zip").write_text("earlier run")
-    argv = ["--algo", "ppo", "--run-dir", str(run), "--n-timesteps", "64", "--n-envs", "1",
-            "--eval-freq", "64", "--eval-episodes", "1", "--no-progress"]
-    assert train_main(argv) == 2
+    inode = run.stat().st_ino
+    argv = ["--algo", "ppo", "--n-timesteps", "64", "--n-envs", "1", "--eval-freq", "64",
+            "--eval-episodes", "1", "--no-progress"]
+    assert train_main(argv + ["--run-dir", str(run), "--overwrite"]) == 0
+    assert run.stat().st_ino == inode, "an empty folder must be used, not deleted and remade"
+    assert (run / RUN_MARKER).is_file() and (run / "model.zip").exists()
+    assert train_main(argv + ["--run-dir", str(run)]) == 2
     assert "already exists and is not empty" in capsys.readouterr().err
-    assert (run / "checkpoint.zip").read_text() == "earlier run", "the earlier run was touched"
-    assert train_main(argv + ["--overwrite"]) == 2  # no config.yml: not a run of this script
-    assert "nothing was deleted" in capsys.readouterr().err
-    assert (run / "checkpoint.zip").read_text() == "earlier run"
-    (run / "config.yml").write_text("algo: ppo\n")
-    assert train_main(argv + ["--overwrite"]) == 0
-    assert not (run / "checkpoint.zip").exists() and (run / "model.zip").exists()
-    (run / "notes.txt").write_text("keep me")
-    assert train_main(argv + ["--overwrite"]) == 2, "a folder with foreign files was replaced"
-    assert "holds files a run does not write (notes.txt)" in capsys.readouterr().err
-    assert (run / "notes.txt").read_text() == "keep me"
-    parent = ["--run-dir", str(tmp_path)]
-    os.chdir(run)
+    good = tmp_path / "good"
+    shutil.copytree(run, good)
+    assert train_main(argv + ["--run-dir", str(run), "--overwrite"]) == 0  # its own files only
+    for extra, reason in ((".env", "holds files a run does not write (.env)"),
+                          ("notes.txt", "holds files a run does not write (notes.txt)"),
+                          ("tb/mydata/paper.tex", "tb/mydata")):
+        victim = tmp_path / "victim"
+        shutil.copytree(good, victim)
+        (victim / extra).parent.mkdir(parents=True, exist_ok=True)
+        (victim / extra).write_text("keep me")
+        assert train_main(argv + ["--run-dir", str(victim), "--overwrite"]) == 2, extra
+        err = capsys.readouterr().err
+        assert reason in err and "nothing was deleted" in err, err
+        assert (victim / extra).read_text() == "keep me"
+        shutil.rmtree(victim)
+    (good / RUN_MARKER).unlink()  # e.g. a folder with a config.yml of its own
+    assert train_main(argv + ["--run-dir", str(good), "--overwrite"]) == 2
+    assert "has no .rolling-drive-run marker" in capsys.readouterr().err
+    (good / RUN_MARKER).write_text("x")
+    link = tmp_path / "link"
+    link.symlink_to(good)
+    assert train_main(argv + ["--run-dir", str(link), "--overwrite"]) == 2
+    assert "is a symbolic link" in capsys.readouterr().err
+    os.chdir(good / "tb")
     try:
-        assert train_main(argv[:2] + parent + argv[4:] + ["--overwrite"]) == 2
+        assert train_main(argv + ["--run-dir", str(good), "--overwrite"]) == 2
         assert "one of its parents" in capsys.readouterr().err
     finally:
         os.chdir(REPO)
-    assert (run / "notes.txt").exists()
+    assert (good / "model.zip").exists()
 
 
 def test_goal_verdicts():

@@ -302,6 +302,10 @@ def test_scene_file_errors_name_the_file(tmp_path):
     dup.write_text(text + "mu: 0.5\n")
     with pytest.raises(ValueError, match="duplicate key 'mu'"):
         load_scene(dup)
+    from rolling_env.scenes import _UniqueKeyLoader
+    doc = "a: {<<: {p: 1, q: 2}, p: 3}\nb: {<<: [{p: 1}, {p: 2, q: 1}], r: 1}"
+    assert yaml.load(doc, Loader=_UniqueKeyLoader) == yaml.safe_load(doc), (
+        "a key overriding a merged one is not a duplicate")
     merged = tmp_path / "merged.yaml"  # YAML merge keys work as with yaml.safe_load
     merged.write_text(text.replace("w_wear: 0.5", "w_wear: 0.5\nx: &a {p: 1}\ny: {<<: *a}"))
     with pytest.raises(ValueError, match="unknown scene key 'x'"):

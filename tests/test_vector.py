@@ -229,14 +229,21 @@ def test_gymnasium_vector_infos_match_sync_mode():
         (o1, *_, a), (o2, *_, b) = ours.step(acts), sync.step(acts)
         assert np.array_equal(o1, o2)
         same(a, b, f"step {t}")
-    mask = np.array([False, True, False])  # Gymnasium's partial reset
-    (o1, a), (o2, b) = (ours.reset(seed=11, options={"reset_mask": mask.copy()}),
-                        sync.reset(seed=11, options={"reset_mask": mask.copy()}))
+    for t, acts in enumerate(_actions(3, n=3, steps=20)):  # until every env has just ended
+        (o1, r1, te1, tr1, a), (o2, r2, te2, tr2, b) = ours.step(acts), sync.step(acts)
+        if tr1.all():
+            break
+    assert tr1.all() and tr2.all(), "the episodes should end together (episode_steps = 6)"
+    mask = np.array([False, True, False])  # Gymnasium's partial reset; envs 0, 2 stay pending
+    (o1, a), (o2, b) = (ours.reset(seed=[1, 11, 2], options={"reset_mask": mask.copy()}),
+                        sync.reset(seed=[1, 11, 2], options={"reset_mask": mask.copy()}))
     assert np.array_equal(o1, o2), "partial reset: observations differ"
     same(a, b, "partial reset")
     for t, acts in enumerate(_actions(4, n=3, steps=8)):
-        (o1, *_, a), (o2, *_, b) = ours.step(acts), sync.step(acts)
-        assert np.array_equal(o1, o2), f"after the partial reset, step {t}: obs differ"
+        s1, s2 = ours.step(acts), sync.step(acts)
+        for name, x, y in zip(("obs", "reward", "terminated", "truncated"), s1[:4], s2[:4]):
+            assert np.array_equal(x, y), f"after the partial reset, step {t}: {name} differ"
+        same(s1[4], s2[4], f"after the partial reset, step {t}")
     with pytest.raises(ValueError, match=r"options\['reset_mask'\] must be a numpy bool array"):
         ours.reset(options={"reset_mask": [True, False, False]})
 
@@ -266,6 +273,18 @@ def test_batch_reset_with_a_bad_option_changes_nothing():
             venv.reset(seed=5, options=bad)
         assert all(np.array_equal(x, y) for x, y in zip(state, (core.steps, core.target, core.st)))
         assert [r.bit_generator.state for r in core.rngs] == rngs, "reseeded before the check"
+
+
+def test_sb3_vecenv_checks_options_before_seeding():
+    v = RollingDriveVecEnv(2)
+    v.seed(0)
+    v.reset()
+    rngs = [r.bit_generator.state for r in v.core.rngs]
+    v.seed(5)
+    v.set_options({"target": 1.0})
+    with pytest.raises(ValueError, match=r"options\['target'\]"):
+        v.reset()
+    assert [r.bit_generator.state for r in v.core.rngs] == rngs, "reseeded before the check"
 
 
 def test_sb3_set_attr_target_checked():
