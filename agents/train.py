@@ -175,7 +175,7 @@ def _setup(args):
     return model, eval_env, run, n_envs, n_timesteps
 
 
-RUN_MARKER = ".rolling-drive-run"  # written when the script creates a run folder
+RUN_MARKER = "rolling-drive-run.txt"  # written when the script creates a run folder
 RUN_FILES = re.compile(  # what the script (and SB3's TensorBoard logger) writes in a run folder
     r"^(config\.yml|command\.txt|meta\.json|evaluations\.npz|tb|\.eval_scratch|"
     + re.escape(RUN_MARKER) + r"|(model|best_model|checkpoint)(\.zip|_vecnormalize\.pkl)|"

@@ -226,7 +226,7 @@ def test_train_refuses_a_used_run_folder(tmp_path, capsys):
         shutil.rmtree(victim)
     (good / RUN_MARKER).unlink()  # e.g. a folder with a config.yml of its own
     assert train_main(argv + ["--run-dir", str(good), "--overwrite"]) == 2
-    assert "has no .rolling-drive-run marker" in capsys.readouterr().err
+    assert f"has no {RUN_MARKER} marker" in capsys.readouterr().err
     (good / RUN_MARKER).write_text("x")
     link = tmp_path / "link"
     link.symlink_to(good)
