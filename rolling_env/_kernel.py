@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, uint64
 
 # ----------------------------------------------------------------------------- state layout
 ST_C = 0        # patch centre c (spring frame)
@@ -73,7 +73,7 @@ OUT_N = 6         # normal force
 OUT_STICK = 7     # stuck fraction of the contact length at the end of the tick (1 with mu = inf)
 N_OUT = 8
 
-# columns of the friction work array L (finite friction only)
+# rows of the friction work array L (finite friction only; cells along the second axis)
 L_LIMIT = 0      # friction limit mu E*/G* integral of uN over the cell's part in contact
 L_E0, L_E1, L_E2 = 1, 2, 3  # released energy of an edge cell this sub-step: e0 + e1 s + e2 s^2
 N_LCOL = 4
@@ -84,6 +84,14 @@ P_E_OVER_G = 1
 P_X_LO = 2
 P_DX = 3
 N_PARAM = 4
+
+
+@njit(cache=True, inline="always")
+def _cells(lo, hi):
+    """range(lo, hi) over cell indices as unsigned integers (0 <= lo, callers clamp): numba
+    then indexes the cell arrays without its negative-index wrap-around, which cost a third
+    of the time of the cell loops."""
+    return range(uint64(lo), uint64(hi))
 
 
 @njit(cache=True, inline="always")
@@ -266,8 +274,10 @@ def _set_radius(U, st, p, a_new, d_new, mu):
             j0 += 1
             j1 -= 1
         T = st[ST_T]
-        for k in range(i0, i1 + 1 - (j1 - j0 + 1)):
-            i = k if k < j0 else k + (j1 - j0 + 1)
+        n_keep = uint64(j1 - j0 + 1)
+        uj0 = uint64(j0)
+        for k in _cells(i0, i1 + 1 - (j1 - j0 + 1)):
+            i = k if k < uj0 else k + n_keep
             e_rel, dU, _ = _shrink_cell(U, i, x_lo + i * dx, dx, c, a_old, a_new)
             rel += e_rel
             T += dU
@@ -276,12 +286,22 @@ def _set_radius(U, st, p, a_new, d_new, mu):
     else:
         inv3R = 1.0 / (3.0 * p[P_R])
         muEG = mu * p[P_E_OVER_G]
-        for i in range(i0, i1 + 1):
+        lo_new = c - a_new
+        hi_new = c + a_new
+        for i in _cells(i0, i1 + 1):
             xL = x_lo + i * dx
-            e_rel, _, ln = _shrink_cell(U, i, xL, dx, c, a_old, a_new)
-            rel += e_rel
+            xR = xL + dx
+            if xL >= lo_new and xR <= hi_new:
+                # inside the new contact (and so the old): nothing cut off; the same
+                # overlap and limit as _shrink_cell and _normal_content give there
+                ln = xR - xL
+                val = _inner_content(xL - c, xR - c, d_new, inv3R)
+                Li = muEG * (val if val > 0.0 else 0.0)
+            else:
+                e_rel, _, ln = _shrink_cell(U, i, xL, dx, c, a_old, a_new)
+                rel += e_rel
+                Li = muEG * _normal_content(xL, xR, c, a_new, d_new, inv3R) if ln > 0.0 else 0.0
             if ln > 0.0:
-                Li = muEG * _normal_content(xL, xL + dx, c, a_new, d_new, inv3R)
                 Ui = U[i]
                 if abs(Ui) > Li:
                     ex = abs(Ui) - Li
@@ -317,11 +337,11 @@ def _solve_bracketed(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st):
     """
     s_hi = -np.inf
     s_lo = np.inf
-    for i in range(i0, i1 + 1):
+    for i in _cells(i0, i1 + 1):
         Bi = B[i]
         if Bi > 0.0:
-            sh = (L[i, 0] - A[i]) / Bi
-            sl = (-L[i, 0] - A[i]) / Bi
+            sh = (L[0, i] - A[i]) / Bi
+            sl = (-L[0, i] - A[i]) / Bi
             if sh > s_hi:
                 s_hi = sh
             if sl < s_lo:
@@ -375,8 +395,8 @@ def _g_eval(A, B, L, i0, i1, s0, vv, v0, mass, F, dt, st):
     Tt = 0.0
     Ta = 0.0
     dT = 0.0
-    for i in range(i0, i1 + 1):
-        Ut, dU = _clip_slope(A[i] + B[i] * s, L[i, 0], B[i])
+    for i in _cells(i0, i1 + 1):
+        Ut, dU = _clip_slope(A[i] + B[i] * s, L[0, i], B[i])
         dT += dU
         Tt += Ut
         Ta += abs(Ut)
@@ -410,13 +430,48 @@ def _inner_range(i0, i1, full_lo, full_hi, x_lo, dx):
 
 
 @njit(cache=True)
+def _limit_sum(L, i0, i1, j0, j1):
+    """Sum of the friction limits of cells i0..i1 (the inner cells j0..j1 first, then the
+    edge cells, the order of the build pass)."""
+    total = 0.0
+    for i in _cells(j0, j1 + 1):
+        total += L[0, i]
+    n_in = uint64(j1 - j0 + 1)
+    uj0 = uint64(j0)
+    for k in _cells(i0, i1 + 1 - (j1 - j0 + 1)):
+        total += L[0, k if k < uj0 else k + n_in]
+    return total
+
+
+@njit(cache=True)
+def _stuck_length(U, L, i0, i1, j0, j1, x_lo, dx, c1, a):
+    """Length of the contact whose cells stick (below their friction limit by more than
+    1e-12 of it) after a commit: inner cells count dx, edge cells their overlap with the
+    contact centred at c1.  Called for the last sub-step of a tick only."""
+    stuck = 0.0
+    for i in _cells(j0, j1 + 1):
+        Li = L[0, i]
+        if abs(U[i]) - Li < -1e-12 * Li:
+            stuck += dx
+    n_in = uint64(j1 - j0 + 1)
+    uj0 = uint64(j0)
+    for k in _cells(i0, i1 + 1 - (j1 - j0 + 1)):
+        i = k if k < uj0 else k + n_in
+        Li = L[0, i]
+        if abs(U[i]) - Li < -1e-12 * Li:
+            xL = x_lo + i * dx
+            stuck += _overlap(xL, xL + dx, c1, a)
+    return stuck
+
+
+@njit(cache=True)
 def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
     """Advance one control tick of n_sub sub-steps with piecewise-constant inputs.
 
     d: indentation, u: omega R (signed), v: sphere translation rate (signed),
     vs_presc: runner velocity when ``mass is None`` (prescribed runner), else ignored.
     mu / mass / load: float or None (infinite friction / prescribed runner / no load).
-    L: work array of shape (n, N_LCOL) with finite friction (friction limit and the
+    L: work array of shape (N_LCOL, n) with finite friction (friction limit and the
     released-energy coefficients of edge cells), unused otherwise.
     ledger: True keeps the impulse and the energy ledger (``ST_IMP``, ``ST_REL``,
     ``ST_DRIVE``, ``ST_RUNNER``, ``ST_EXT``, ``OUT_IMP``); None leaves them out (the env needs
@@ -449,12 +504,22 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
         F = load
     imp_tick = 0.0
     stuck = 0.0
+    # the state the sub-steps advance, kept in locals (st may alias the cell arrays for the
+    # compiler, which would reload and store it around every cell loop); written back below
+    c1 = st[ST_C]
+    v1 = st[ST_VS]
+    T1 = st[ST_T]
+    xs = st[ST_XS]
+    xsph = st[ST_XSPH]
+    time = st[ST_TIME]
+    slip_acc = st[ST_SLIP]
+    iters = st[ST_ITER]
     for k_sub in range(n_sub):
         last = k_sub == n_sub - 1
-        c0 = st[ST_C]
+        c0 = c1
         c1 = c0 + u * dt
-        v0 = st[ST_VS]
-        T0 = st[ST_T]
+        v0 = v1
+        T0 = T1
         # cells touched: union of the contact at c0 and c1
         i0 = int(math.floor((min(c0, c1) - a - x_lo) / dx))
         i1 = int(math.floor((max(c0, c1) + a - x_lo) / dx))
@@ -482,20 +547,20 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
             j0 = i1 + 1
             j1 = i1
         n_in = j1 - j0 + 1
+        uj0 = uint64(j0)
+        un_in = uint64(n_in)
         # ------------------------------------------------ build: inner cells (A = U, B = dx dt)
         SU = 0.0
-        for i in range(j0, j1 + 1):
+        for i in _cells(j0, j1 + 1):
             Ai = U[i]
-            A[i] = Ai
-            B[i] = dxdt
+            A[i] = Ai  # B[i] = dx dt is written only for _solve_bracketed, which reads it
             SU += Ai
             if mu is not None:
                 zl = (x_lo + i * dx) - c1
                 Li = muEG * dx * (d - (zl * zl + zl * (zl + dx) + (zl + dx) * (zl + dx)) * inv3R)
                 if Li < 0.0:
                     Li = 0.0
-                L[i, 0] = Li
-                SL += Li
+                L[0, i] = Li
                 if mass is not None:
                     Ut, dU = _clip_slope(Ai + dxdt * sv0, Li, dxdt)
                     Tt0 += Ut
@@ -507,8 +572,8 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
                 SIA += SU * dt
                 SIB += n_in * 0.5 * dxdt * dt
         # ------------------------------------------------ build: edge cells (walked)
-        for k in range(i0, i1 + 1 - n_in):
-            i = k if k < j0 else k + n_in
+        for k in _cells(i0, i1 + 1 - n_in):
+            i = k if k < uj0 else k + un_in
             xL = x_lo + i * dx
             xR = xL + dx
             if a > 0.0:
@@ -521,9 +586,9 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
                         E1 += e1
                         E2 += e2
                     else:
-                        L[i, 1] = e0
-                        L[i, 2] = e1
-                        L[i, 3] = e2
+                        L[1, i] = e0
+                        L[2, i] = e1
+                        L[3, i] = e2
             else:
                 Ai = 0.0
                 Bi = 0.0
@@ -533,8 +598,7 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
             SB += Bi
             if mu is not None:
                 Li = muEG * _normal_content(xL, xR, c1, a, d, inv3R) if a > 0.0 else 0.0
-                L[i, 0] = Li
-                SL += Li
+                L[0, i] = Li
                 if mass is not None:
                     Ut, dU = _clip_slope(Ai + Bi * sv0, Li, Bi)
                     Tt0 += Ut
@@ -552,9 +616,11 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
                 # limit of a vanishing contact, no creep (as the finite-friction solver does)
                 v1 = s0
         else:
-            if mass == 0.0 and SL <= abs(F) and (SL > 0.0 or F != 0.0):
-                st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_SLIDE
-            st[ST_ITER] += 1.0
+            if mass == 0.0:
+                SL = _limit_sum(L, i0, i1, j0, j1)  # the largest force the contact holds
+                if SL <= abs(F) and (SL > 0.0 or F != 0.0):
+                    st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_SLIDE
+            iters += 1.0
             g0 = -dt * (Tt0 + F)
             gp = mass + dt * dT0
             v1 = v0
@@ -563,7 +629,10 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
                 # v0; the bracketed solver picks the root (for no contact: the sphere's creep
                 # velocity, the limit of a vanishing contact)
                 fast = False
+                st[ST_ITER] = iters
+                B[j0:j1 + 1] = dxdt
                 v1 = _solve_bracketed(A, B, L, i0, i1, s0, v0, v0, mass, F, dt, st)
+                iters = st[ST_ITER]
             elif g0 != 0.0:
                 v1 = v0 - g0 / gp  # root of the linear piece active at v0
         # ---------------------------------------------------------------- commit
@@ -574,35 +643,31 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
             slip = 0.0
             rel = 0.0
             clipped = False
-            if last:
-                stuck = 0.0
-            # inner cells
-            for i in range(j0, j1 + 1):
+            # inner cells (branch-free: a cell beyond its limit slides to it, adding the
+            # slip work; the others add exactly 0 to it)
+            for i in _cells(j0, j1 + 1):
                 Ut = A[i] + dxdt * s
                 if mu is not None:
-                    Li = L[i, 0]
+                    Li = L[0, i]
                     ex = abs(Ut) - Li
-                    if ex > 0.0:
-                        slip += Li * ex * inv_dx
-                        Ut = Li if Ut > 0.0 else -Li
-                        clipped = True
-                    elif last and ex < -1e-12 * Li:
-                        stuck += dx
+                    clipped |= ex > 0.0
+                    slip += Li * max(ex, 0.0) * inv_dx
+                    Ut = Li if Ut > Li else (-Li if Ut < -Li else Ut)
                     if mass is not None:
                         Ta += abs(Ut)
                 U[i] = Ut
                 T1 += Ut
             # edge cells
-            for k in range(i0, i1 + 1 - n_in):
-                i = k if k < j0 else k + n_in
+            for k in _cells(i0, i1 + 1 - n_in):
+                i = k if k < uj0 else k + un_in
                 Ut = A[i] + B[i] * s
                 if mu is not None:
-                    Li = L[i, 0]
+                    Li = L[0, i]
                     if ledger is not None and a > 0.0:
                         # the deflection an edge cell released this sub-step, from the creep
                         # integral, can be no larger than the friction limit allows (the
                         # released material is at the limit once the cell slides)
-                        ei = L[i, 1] + s * (L[i, 2] + s * L[i, 3])
+                        ei = L[1, i] + s * (L[2, i] + s * L[3, i])
                         if abs(Ut) > Li and Ut != 0.0:
                             ei *= (Li / Ut) * (Li / Ut)
                         elif Li == 0.0 and ei > 0.0:
@@ -620,17 +685,14 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
                                 ei = min(ei, 0.5 * Ln * Ln / ln)
                         rel += ei
                     ex = abs(Ut) - Li
-                    if ex > 0.0 or (last and ex < -1e-12 * Li):
+                    if ex > 0.0:
+                        # slip work: the limit times the slip of the cell's mean deflection
                         xL = x_lo + i * dx
                         ell = _overlap(xL, xL + dx, c1, a)
-                        if ex > 0.0:
-                            # slip work: the limit times the slip of the cell's mean deflection
-                            if ell > 0.0:
-                                slip += Li * ex / ell
-                            Ut = Li if Ut > 0.0 else -Li
-                            clipped = True
-                        else:
-                            stuck += ell
+                        if ell > 0.0:
+                            slip += Li * ex / ell
+                        Ut = Li if Ut > 0.0 else -Li
+                        clipped = True
                     if mass is not None:
                         Ta += abs(Ut)
                 U[i] = Ut
@@ -638,18 +700,20 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
             if mu is None or mass is None or not fast:
                 break
             # verify the one-step root: g(v1) vanishes unless the step crossed a kink
-            st[ST_ITER] += 1.0
+            iters += 1.0
             g1 = mass * (v1 - v0) - dt * (T1 + F)
             if _converged(g1, mass, v1, v0, dt, Ta, F):
                 break
             fast = False
+            st[ST_ITER] = iters
+            B[j0:j1 + 1] = dxdt
             v1 = _solve_bracketed(A, B, L, i0, i1, s0, v0, v1, mass, F, dt, st)
-        st[ST_C] = c1
-        st[ST_VS] = v1
-        st[ST_XS] += v1 * dt
-        st[ST_XSPH] += v * dt
-        st[ST_T] = T1
-        st[ST_SLIP] += slip
+            iters = st[ST_ITER]
+        if last and mu is not None:
+            stuck = _stuck_length(U, L, i0, i1, j0, j1, x_lo, dx, c1, a)
+        xs += v1 * dt
+        xsph += v * dt
+        slip_acc += slip
         if ledger is not None:
             if clipped:
                 imp = 0.5 * (T0 + T1) * dt  # some cells slid: trapezoid on the clipped force
@@ -665,22 +729,29 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
             if load is not None:
                 st[ST_EXT] += load * v1 * dt
             imp_tick += imp
-        st[ST_TIME] += dt
+        time += dt
         slip_tick += slip
-    T1 = st[ST_T]
+    st[ST_C] = c1
+    st[ST_VS] = v1
+    st[ST_T] = T1
+    st[ST_XS] = xs
+    st[ST_XSPH] = xsph
+    st[ST_TIME] = time
+    st[ST_SLIP] = slip_acc
+    st[ST_ITER] = iters
     out[OUT_T] = T1
     out[OUT_IMP] = imp_tick  # 0 without the ledger
-    out[OUT_VS] = st[ST_VS]
-    out[OUT_XS] = st[ST_XS]
+    out[OUT_VS] = v1
+    out[OUT_XS] = xs
     out[OUT_SLIP] = slip_tick
-    out[OUT_C] = st[ST_C]
+    out[OUT_C] = c1
     out[OUT_N] = 4.0 / 3.0 * EG * a * d
     # stuck fraction of the contact length (counted in the last commit)
     if mu is None or a == 0.0:
         out[OUT_STICK] = 1.0 if a > 0.0 else 0.0
     else:
         out[OUT_STICK] = min(stuck / (2.0 * a), 1.0)
-    if not (math.isfinite(T1) and math.isfinite(st[ST_VS]) and math.isfinite(st[ST_XS])):
+    if not (math.isfinite(T1) and math.isfinite(v1) and math.isfinite(xs)):
         st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_NONFINITE
 
 

@@ -172,8 +172,8 @@ def specialisation(ticks=300, scenes=None):
         full = BatchCore(64, scene=sc)
         mu, mass, load, _ = full.features
         full.features = (1e30 if mu is None else mu, mass, 0.0 if load is None else load, True)
-        if full.L.shape[1] == 1:
-            full.L = np.zeros(full.U.shape + (K.N_LCOL,))
+        if full.L.shape[2] == 1:
+            full.L = np.zeros((full.num_envs, K.N_LCOL, full.U.shape[1]))
         for c in (spec, full):
             c._step_fn = __import__("rolling_env._envkernel", fromlist=["x"]).env_step_serial
         r_spec, _ = _core_rate(spec, ticks)

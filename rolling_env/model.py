@@ -151,7 +151,7 @@ class Drive:
         self.A = np.zeros(n)
         self.B = np.zeros(n)
         # friction work array (limits, edge release coefficients): none without friction
-        self.L = np.zeros((n if finite_mu else 1, K.N_LCOL))
+        self.L = np.zeros((K.N_LCOL, n if finite_mu else 1))
         self.st = np.zeros(K.N_STATE)
         self.ledger = True  # run() keeps the impulse and energy ledger; the env kernel does not
 
