@@ -380,6 +380,7 @@ def report(res) -> str:
           f"kernel on one thread; the rest of the threaded / serial ratio "
           f"({b['threaded_1'] / b['serial']:.2f}x) is the prange kernel's different generated "
           "code."]
+    L += ["", *_ratio_bound(b)]
     if res.get("sb3"):
         L += ["", "## Training env (SB3, default scene, both in VecMonitor)", "",
               "| envs | RollingDriveVecEnv (batched, used by agents.train) | DummyVecEnv of "
@@ -406,6 +407,39 @@ def report(res) -> str:
           f"(state arrays {s['memory'][1024]['state_mib']:.1f} MiB, "
           f"{s['memory'][1024]['above_imports_mib']:.1f} MiB above the imports)"]
     return "\n".join(L) + "\n"
+
+
+def ratio_bound(single, serial, one_thread, threads, target=10.0) -> dict:
+    """What batching can give at most, from rates measured in one run (env steps/s).
+
+    The single env's step (``1/single``) is the physics tick, which costs what one env-step
+    of the batched serial kernel costs (``1/serial``; the single env runs that kernel with a
+    batch of one), plus a Python layer (gym.make's wrappers, the action check, the info dict,
+    the kernel dispatch) that batching removes.  With ``threads`` threads scaling perfectly the
+    batched env steps at ``threads * one_thread``, so the ratio is at most
+    ``threads * one_thread / single``.  A physics tick ``f`` times faster speeds up both; the
+    ratio reaches ``target`` at ``f = (target / (threads * one_thread) - 1 / serial) /
+    (1 / single - 1 / serial)`` (1 or less: within reach now)."""
+    x, y, y1 = 1.0 / single, 1.0 / serial, 1.0 / one_thread
+    need = (target * y1 / threads - y) / (x - y) if x > y else math.inf
+    return dict(step_us=1e6 * x, physics_us=1e6 * y, python_us=1e6 * (x - y),
+                bound=threads * x / y1, speedup_needed=need, target=target)
+
+
+def _ratio_bound(b) -> list:
+    one = max(b["serial"], b["threaded_1"])
+    r = ratio_bound(b["single"], b["serial"], one, b["threads"])
+    got = b["threaded"] / b["single"]
+    return ["Where the single env's time goes, and what batching can give at most (same run): "
+            f"its step takes {r['step_us']:.2f} us, of which {r['physics_us']:.2f} us is the "
+            "physics tick (one env-step of the batched serial kernel, which the single env runs "
+            f"with a batch of one) and {r['python_us']:.2f} us the Python layer (gym.make's "
+            "wrappers, action check, info dict, kernel dispatch) that batching removes.  With "
+            f"{b['threads']} threads scaling perfectly on the faster one-thread kernel "
+            f"({1e6 / one:.2f} us per env-step), batching reaches at most {r['bound']:.1f}x; "
+            f"measured {got:.1f}x ({got / r['bound']:.0%} of that bound).  "
+            f"{r['target']:.0f}x needs a physics tick {r['speedup_needed']:.2f}x faster at the "
+            "same accuracy (a faster tick also speeds up the single env)."]
 
 
 def _parallel_min():

@@ -1,0 +1,33 @@
+"""The benchmark's arithmetic (timings themselves stay out of the test suite)."""
+import math
+
+import pytest
+
+from rolling_env.bench import ratio_bound
+
+
+@pytest.mark.parametrize("single,serial,one,threads", [
+    (136e3, 450e3, 520e3, 2), (170e3, 448e3, 523e3, 2), (50e3, 1e6, 1e6, 4)])
+def test_ratio_bound_speedup_reaches_the_target(single, serial, one, threads):
+    """A physics tick f = speedup_needed times faster makes batched / single equal the target:
+    the single env keeps its Python layer and runs the faster tick, the batched env runs the
+    faster tick on every thread."""
+    r = ratio_bound(single, serial, one, threads, target=10.0)
+    f = r["speedup_needed"]
+    step = r["python_us"] + r["physics_us"] / f
+    batched_per_step = 1e6 / one / f / threads
+    assert step / batched_per_step == pytest.approx(10.0, rel=1e-12), r
+    assert r["bound"] == pytest.approx(threads * one / single, rel=1e-12)
+    assert r["step_us"] == pytest.approx(r["python_us"] + r["physics_us"], rel=1e-12)
+
+
+def test_ratio_bound_within_reach_needs_no_speedup():
+    """When the bound already exceeds the target, the needed speed-up is at most 1."""
+    r = ratio_bound(single=50e3, serial=1e6, one_thread=1e6, threads=2, target=10.0)
+    assert r["bound"] == pytest.approx(40.0) and r["speedup_needed"] <= 1.0, r
+
+
+def test_ratio_bound_no_python_layer_is_unreachable():
+    """A single env that is all physics cannot gain from batching beyond the threads."""
+    r = ratio_bound(single=400e3, serial=400e3, one_thread=400e3, threads=2, target=10.0)
+    assert r["bound"] == pytest.approx(2.0) and math.isinf(r["speedup_needed"]), r
