@@ -89,8 +89,9 @@ N_PARAM = 4
 @njit(cache=True, inline="always")
 def _cells(lo, hi):
     """range(lo, hi) over cell indices as unsigned integers (0 <= lo, callers clamp): numba
-    then indexes the cell arrays without its negative-index wrap-around, which cost a third
-    of the time of the cell loops."""
+    then indexes the cell arrays without its negative-index wrap-around (three integer
+    operations per access: a clip-and-sum loop over 21 cells took 27 ns with signed and 13 ns
+    with unsigned indices on the project's machine)."""
     return range(uint64(lo), uint64(hi))
 
 
@@ -746,7 +747,7 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
     out[OUT_SLIP] = slip_tick
     out[OUT_C] = c1
     out[OUT_N] = 4.0 / 3.0 * EG * a * d
-    # stuck fraction of the contact length (counted in the last commit)
+    # stuck fraction of the contact length (counted after the last sub-step's commit)
     if mu is None or a == 0.0:
         out[OUT_STICK] = 1.0 if a > 0.0 else 0.0
     else:

@@ -25,10 +25,10 @@ FP_PER_CYCLE = 4  # scalar double-precision operations per cycle (2 add + 2 mul 
 STORES_PER_CYCLE = 2  # two store ports (AMD Zen 4/5, Intel since Ice Lake)
 # the minimal update of one cell inside the contact per sub-step (build + commit, see
 # _kernel._tick): with friction the friction limit (a quadratic, 13 operations), clip and slope
-# (4), content and sums (6), commit with clip, slip and sums (13), storing A, B, L and U;
-# without friction a copy, the creep update and two sums, storing A, B and U
+# (4), content and sums (6), commit with clip, slip and sums (13), storing A, L and U;
+# without friction a copy, the creep update and two sums, storing A and U
 OPS_PER_CELL = {"finite_mu": 36, "infinite_mu": 6}
-STORES_PER_CELL = {"finite_mu": 4, "infinite_mu": 3}
+STORES_PER_CELL = {"finite_mu": 3, "infinite_mu": 2}
 
 
 def core_hz() -> float:
