@@ -11,10 +11,11 @@ transitions are bit-identical to N single envs).  Two thin adapters:
 
 Seeding follows Gymnasium: env i of a batch seeded s behaves like a single env seeded s + i.
 The threaded kernel (``prange``) is used from ``PARALLEL_MIN_ENVS`` envs on: measured on the
-idle 2-core machine (default scene, ``rolling-drive bench``, results/benchmarks.md) it is 0.9x
-the serial kernel at 1 env, 1.0-1.2x at 2 (within the spread between runs), 1.4x at 4 and
-2.2-2.4x at 64-256, of which about 1.2x is the prange kernel's different generated code (it
-is faster on one thread too) and the rest the second core.
+2-core machine (default scene, ``rolling-drive bench``, results/benchmarks.md) it is 0.8-0.9x
+the serial kernel at 1 env, 1.0-1.2x at 2 (within the spread between runs), 1.2-1.4x at 4 and
+1.9-2.3x at 64-256, where the second core gives about 2x (the serial kernel has caught up
+with the prange kernel's generated code on one thread since its cell loops use unsigned
+indices).
 """
 from __future__ import annotations
 
