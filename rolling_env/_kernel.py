@@ -88,11 +88,12 @@ N_PARAM = 4
 
 @njit(cache=True, inline="always")
 def _cells(lo, hi):
-    """range(lo, hi) over cell indices as unsigned integers (0 <= lo, callers clamp): numba
-    then indexes the cell arrays without its negative-index wrap-around (three integer
-    operations per access: a clip-and-sum loop over 21 cells took 27 ns with signed and 13 ns
-    with unsigned indices on the project's machine)."""
-    return range(uint64(lo), uint64(hi))
+    """range(lo, hi) over cell indices as unsigned integers: numba then indexes the cell
+    arrays without its negative-index wrap-around (three integer operations per access: a
+    clip-and-sum loop over 21 cells took 27 ns with signed and 13 ns with unsigned indices on
+    the project's machine).  Callers clamp lo >= 0 wherever the range is not empty; hi < lo
+    (a contact that left the row) gives an empty range."""
+    return range(uint64(lo), uint64(max(hi, lo)))
 
 
 @njit(cache=True, inline="always")

@@ -391,3 +391,35 @@ def test_tiny_rolling_rate_stays_finite(mu):
     drv.reset()
     out = drv.run(dt_tick=1e-4, n_sub=4, omega_R=[1e-312, -1e-312], v=[0.0, 0.0], N=[0.5, 0.5])
     assert np.all(np.isfinite(out["T"])) and np.all(np.isfinite(out["vstar"]))
+
+
+@pytest.mark.parametrize("direction", [-1.0, 1.0])
+@pytest.mark.parametrize("mu, m", [(0.3, 1e-3), (0.3, math.inf), (math.inf, 1e-3),
+                                   (math.inf, math.inf), (0.3, 0.0)])
+def test_contact_leaving_the_row_raises_and_touches_nothing_outside(direction, mu, m):
+    """A rolling rate that carries the contact off the spring row within a tick (several
+    sub-steps wholly beyond either end, where the cell ranges are empty or negative before
+    clamping) raises the grid error; the cell arrays stay finite and the cells the contact
+    never reached stay untouched (the unsigned cell loops stay inside the row)."""
+    drv = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=m), resolution=16,
+                 stroke=(-2 * GEO.a1, 2 * GEO.a1))
+    drv.reset()
+    d1 = GEO.a1 ** 2 / GEO.R  # contact half-width a1
+
+    def run(omega_R, d, n_sub):
+        k = len(omega_R)
+        vs = {"vstar": np.zeros(k)} if m == math.inf else {}
+        return drv.run(dt_tick=GEO.tau / 8, n_sub=n_sub, omega_R=np.array(omega_R),
+                       v=np.zeros(k), d=np.array(d), **vs)
+
+    run([0.0], [d1], 4)  # loads the contact in the middle of the row
+    with pytest.raises(RuntimeError, match="left the spring row"):
+        run([direction * 1e3, 0.0], [0.5 * d1, 0.5 * d1], 8)
+    for arr, name in ((drv.U, "U"), (drv.A, "A"), (drv.B, "B"), (drv.L, "L")):
+        assert np.all(np.isfinite(arr)), f"{name} holds a non-finite value after leaving the row"
+    # the contact left towards one end: the cells beyond the other side of its start were
+    # never in contact and must still be exactly 0
+    x = drv.grid.x_lo + (np.arange(drv.grid.n) + 0.5) * drv.grid.dx  # units of a_ref = a1
+    untouched = (x > 1.5) if direction < 0 else (x < -1.5)
+    assert untouched.sum() >= 16, "the test needs cells the contact never reached"
+    assert np.all(drv.U[untouched] == 0.0), "a cell the contact never reached was written"
