@@ -122,10 +122,24 @@ def _inner_content(zl, zh, d, inv3R):
 
 @njit(cache=True, inline="always")
 def _contact_range(c, a, x_lo, dx, n):
-    """First and last cell touching the contact [c - a, c + a], clamped to the row."""
-    i0 = max(int(math.floor((c - a - x_lo) / dx)), 0)
-    i1 = min(int(math.floor((c + a - x_lo) / dx)), n - 1)
+    """First and last cell touching the contact [c - a, c + a], clamped to the row (i0 in
+    [0, n], i1 in [-1, n - 1]: an empty range for a contact beyond either end)."""
+    i0 = _index(np.floor((c - a - x_lo) / dx), 0, n)
+    i1 = _index(np.floor((c + a - x_lo) / dx), -1, n - 1)
     return i0, i1
+
+
+@njit(cache=True, inline="always")
+def _index(q, lo, hi):
+    """The integral float q (np.floor / np.ceil: numba's math.floor already converts to int)
+    as an int clamped to [lo, hi], clamped in floating point first: a q beyond the int64
+    range (a contact far off the row) or NaN gives an end of the range, never an undefined
+    float-to-int conversion."""
+    if q >= hi:
+        return hi
+    if q >= lo:
+        return int(q)
+    return lo
 
 
 @njit(cache=True, inline="always")
@@ -416,12 +430,12 @@ def _inner_range(i0, i1, full_lo, full_hi, x_lo, dx):
     """Cells j0..j1 of i0..i1 that lie inside [full_lo, full_hi] (inside the contact during the
     whole sub-step), by the same floating-point test as the cell bounds; j1 = j0 - 1 when
     there is none, with i0 <= j0 <= i1 + 1 so that i0..j0-1 and j1+1..i1 are the edge cells."""
-    j0 = min(max(int(math.ceil((full_lo - x_lo) / dx)), i0), i1 + 1)
+    j0 = _index(np.ceil((full_lo - x_lo) / dx), i0, i1 + 1)
     while j0 <= i1 and x_lo + j0 * dx < full_lo:
         j0 += 1
     while j0 > i0 and x_lo + (j0 - 1) * dx >= full_lo:
         j0 -= 1
-    j1 = min(max(int(math.floor((full_hi - x_lo) / dx)) - 1, j0 - 1), i1)
+    j1 = _index(np.floor((full_hi - x_lo) / dx) - 1.0, j0 - 1, i1)
     while j1 >= j0 and x_lo + j1 * dx + dx > full_hi:
         j1 -= 1
     while j1 < i1 and x_lo + (j1 + 1) * dx + dx <= full_hi:
@@ -485,7 +499,8 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
     equation at v0, one Newton step gives the root of the piece active there, and the commit
     verifies it (a kink crossed sends the sub-step to ``_solve_bracketed`` and commits again).
     Cells inside the contact for the whole sub-step (A = U, B = dx dt) take a branch-free
-    loop; only the few edge cells are walked.
+    loop; only the few edge cells are walked.  B of those inner cells is written only before
+    a call of ``_solve_bracketed`` (its only reader); elsewhere it holds stale values.
     """
     R = p[P_R]
     EG = p[P_E_OVER_G]
@@ -523,12 +538,12 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
         v0 = v1
         T0 = T1
         # cells touched: union of the contact at c0 and c1
-        i0 = int(math.floor((min(c0, c1) - a - x_lo) / dx))
-        i1 = int(math.floor((max(c0, c1) + a - x_lo) / dx))
-        if i0 < 0 or i1 > n - 1:
+        f0 = np.floor((min(c0, c1) - a - x_lo) / dx)
+        f1 = np.floor((max(c0, c1) + a - x_lo) / dx)
+        if not (f0 >= 0.0 and f1 <= n - 1.0):
             st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_GRID
-            i0 = max(i0, 0)
-            i1 = min(i1, n - 1)
+        i0 = _index(f0, 0, n)
+        i1 = _index(f1, -1, n - 1)
         full_lo = max(c0, c1) - a
         full_hi = min(c0, c1) + a
         SA = 0.0
@@ -653,7 +668,7 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
                     Li = L[0, i]
                     ex = abs(Ut) - Li
                     clipped |= ex > 0.0
-                    slip += Li * max(ex, 0.0) * inv_dx
+                    slip += Li * ex * inv_dx if ex > 0.0 else 0.0  # not inf * 0
                     Ut = Li if Ut > Li else (-Li if Ut < -Li else Ut)
                     if mass is not None:
                         Ta += abs(Ut)
@@ -753,7 +768,8 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
         out[OUT_STICK] = 1.0 if a > 0.0 else 0.0
     else:
         out[OUT_STICK] = min(stuck / (2.0 * a), 1.0)
-    if not (math.isfinite(T1) and math.isfinite(v1) and math.isfinite(xs)):
+    if not (math.isfinite(T1) and math.isfinite(v1) and math.isfinite(xs)
+            and math.isfinite(slip_tick)):
         st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_NONFINITE
 
 
