@@ -97,6 +97,19 @@ def _cells(lo, hi):
 
 
 @njit(cache=True, inline="always")
+def _edges(i0, i1, j0, j1):
+    """The edge cells of i0..i1 (those outside the inner cells j0..j1) as ``for k in
+    _edges(...)`` with cell ``_edge(k, j0, j1)``: the loop skips the inner block."""
+    return _cells(i0, i1 + 1 - (j1 - j0 + 1))
+
+
+@njit(cache=True, inline="always")
+def _edge(k, j0, j1):
+    """Cell of edge position k (see ``_edges``): below the inner block, or past it."""
+    return k if k < uint64(j0) else k + uint64(j1 - j0 + 1)
+
+
+@njit(cache=True, inline="always")
 def _overlap(xL, xR, c, a):
     lo = max(xL, c - a)
     hi = min(xR, c + a)
@@ -290,10 +303,8 @@ def _set_radius(U, st, p, a_new, d_new, mu):
             j0 += 1
             j1 -= 1
         T = st[ST_T]
-        n_keep = uint64(j1 - j0 + 1)
-        uj0 = uint64(j0)
-        for k in _cells(i0, i1 + 1 - (j1 - j0 + 1)):
-            i = k if k < uj0 else k + n_keep
+        for k in _edges(i0, i1, j0, j1):
+            i = _edge(k, j0, j1)
             e_rel, dU, _ = _shrink_cell(U, i, x_lo + i * dx, dx, c, a_old, a_new)
             rel += e_rel
             T += dU
@@ -452,10 +463,8 @@ def _limit_sum(L, i0, i1, j0, j1):
     total = 0.0
     for i in _cells(j0, j1 + 1):
         total += L[0, i]
-    n_in = uint64(j1 - j0 + 1)
-    uj0 = uint64(j0)
-    for k in _cells(i0, i1 + 1 - (j1 - j0 + 1)):
-        total += L[0, k if k < uj0 else k + n_in]
+    for k in _edges(i0, i1, j0, j1):
+        total += L[0, _edge(k, j0, j1)]
     return total
 
 
@@ -469,10 +478,8 @@ def _stuck_length(U, L, i0, i1, j0, j1, x_lo, dx, c1, a):
         Li = L[0, i]
         if abs(U[i]) - Li < -1e-12 * Li:
             stuck += dx
-    n_in = uint64(j1 - j0 + 1)
-    uj0 = uint64(j0)
-    for k in _cells(i0, i1 + 1 - (j1 - j0 + 1)):
-        i = k if k < uj0 else k + n_in
+    for k in _edges(i0, i1, j0, j1):
+        i = _edge(k, j0, j1)
         Li = L[0, i]
         if abs(U[i]) - Li < -1e-12 * Li:
             xL = x_lo + i * dx
@@ -564,8 +571,6 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
             j0 = i1 + 1
             j1 = i1
         n_in = j1 - j0 + 1
-        uj0 = uint64(j0)
-        un_in = uint64(n_in)
         # ------------------------------------------------ build: inner cells (A = U, B = dx dt)
         SU = 0.0
         for i in _cells(j0, j1 + 1):
@@ -589,8 +594,8 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
                 SIA += SU * dt
                 SIB += n_in * 0.5 * dxdt * dt
         # ------------------------------------------------ build: edge cells (walked)
-        for k in _cells(i0, i1 + 1 - n_in):
-            i = k if k < uj0 else k + un_in
+        for k in _edges(i0, i1, j0, j1):
+            i = _edge(k, j0, j1)
             xL = x_lo + i * dx
             xR = xL + dx
             if a > 0.0:
@@ -675,8 +680,8 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
                 U[i] = Ut
                 T1 += Ut
             # edge cells
-            for k in _cells(i0, i1 + 1 - n_in):
-                i = k if k < uj0 else k + un_in
+            for k in _edges(i0, i1, j0, j1):
+                i = _edge(k, j0, j1)
                 Ut = A[i] + B[i] * s
                 if mu is not None:
                     Li = L[0, i]
