@@ -125,10 +125,7 @@ class RollingDriveEnv(gym.Env):
         self.dt = self.scene.dt
         self._features = self.drive.kernel_features + (None,)  # no energy ledger
         self._sv = EK.scene_vector(self.scene, self.a_max, self.drive)
-        drv = self.drive
-        # batch-of-one views of the drive's arrays for the env kernel
-        self._arrays = (drv.U[None], drv.A[None], drv.B[None], drv.L[None], drv.st[None],
-                        drv._p[None])
+        self._bind_arrays()
         self._act = np.zeros((1, 3))
         self._target = np.zeros(1)
         self._steps = np.zeros(1, dtype=np.int64)
@@ -137,6 +134,24 @@ class RollingDriveEnv(gym.Env):
         self._extra = np.zeros((1, EK.N_X))
         self._history = []
         self._render_state = {}  # this env's figure and window (rolling_env.render)
+
+    def _bind_arrays(self) -> None:
+        """Batch-of-one views of the drive's arrays for the env kernel (made once, not per
+        step: a view costs about as much as the rest of the step's Python layer)."""
+        drv = self.drive
+        self._arrays = (drv.U[None], drv.A[None], drv.B[None], drv.L[None], drv.st[None],
+                        drv._p[None])
+
+    def __getstate__(self):
+        # pickle and deepcopy would turn the views into independent copies: the kernel would
+        # step them while reset() and render() use the drive's own arrays
+        state = self.__dict__.copy()
+        del state["_arrays"]
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._bind_arrays()
 
     @property
     def target(self) -> float:
