@@ -16,7 +16,8 @@ ALGOS = ("ppo", "sac", "td3")
 
 def load_hyperparams(algo: str, scene: str, conf: str | os.PathLike | None = None) -> dict:
     """The scene's entry of ``configs/hyperparams/<algo>.yml`` (RL Zoo format); falls back to
-    the env id's entry (``RollingDrive-v0``) with ``env_kwargs.scene`` set to ``scene``."""
+    the env id's entry (``RollingDrive-v0``) with ``env_kwargs.scene`` set to ``scene``.
+    The entry is returned as written; ``check_hyperparams`` validates it."""
     if algo not in ALGOS:
         raise ValueError(f"algo must be one of {ALGOS}, got {algo!r}")
     path = Path(conf) if conf else CONF_DIR / f"{algo}.yml"
@@ -25,25 +26,322 @@ def load_hyperparams(algo: str, scene: str, conf: str | os.PathLike | None = Non
     if not isinstance(table, dict) or not (scene in table or "RollingDrive-v0" in table):
         raise ValueError(f"{path}: needs an entry for scene {scene!r} or for RollingDrive-v0 "
                          "(RL Zoo format)")
-    if scene in table:
-        hp = dict(table[scene])
-    else:
-        hp = dict(table["RollingDrive-v0"])
-        hp["env_kwargs"] = dict(hp.get("env_kwargs", {}), scene=scene)
+    key = scene if scene in table else "RollingDrive-v0"
+    if not isinstance(table[key], dict):
+        raise ValueError(f"{path}: the entry {key!r} must be a mapping of hyper-parameters, got "
+                         f"{table[key]!r}")
+    hp = dict(table[key])
+    if key != scene:
+        env_kwargs = hp.get("env_kwargs") or {}
+        if not isinstance(env_kwargs, dict):
+            raise ValueError(f"hyper-parameter 'env_kwargs' must be a mapping, got {env_kwargs!r}")
+        hp["env_kwargs"] = dict(env_kwargs, scene=scene)
     return hp
 
 
-def parse_kwargs(text) -> dict:
-    """RL Zoo writes policy_kwargs / normalize as Python literals in strings: "dict(a=1)"."""
+# ----------------------------------------------------------------- RL Zoo kwargs strings
+def _torch_attr(parts: list[str]):
+    """``nn.ReLU`` / ``torch.nn.ReLU`` / ``th.optim.Adam``: a torch.nn module class or a
+    torch.optim optimizer class, nothing else (RL Zoo writes activations this way)."""
+    import torch
+    if parts[:1] in (["torch"], ["th"]):
+        parts = parts[1:]
+    if len(parts) == 2 and parts[0] in ("nn", "optim"):
+        base = torch.nn.Module if parts[0] == "nn" else torch.optim.Optimizer
+        obj = getattr(getattr(torch, parts[0]), parts[1], None)
+        if isinstance(obj, type) and issubclass(obj, base):
+            return obj
+    raise ValueError(f"{'.'.join(parts)!r} is not a torch.nn module or torch.optim optimizer "
+                     "class (allowed names: nn.X, torch.nn.X, th.nn.X, optim.X, th.optim.X)")
+
+
+def _literal(node):
+    """A safe subset of Python: literals, lists, tuples, dicts, ``dict(k=v, ...)`` and torch
+    class names (``_torch_attr``).  Nothing is evaluated."""
+    if isinstance(node, ast.Constant):
+        return node.value
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+        v = _literal(node.operand)
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            return -v if isinstance(node.op, ast.USub) else v
+    if isinstance(node, (ast.List, ast.Tuple)):
+        items = [_literal(e) for e in node.elts]
+        return items if isinstance(node, ast.List) else tuple(items)
+    if isinstance(node, ast.Dict) and None not in node.keys:
+        return {_literal(k): _literal(v) for k, v in zip(node.keys, node.values)}
+    if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "dict"
+            and not node.args and all(kw.arg is not None for kw in node.keywords)):
+        return {kw.arg: _literal(kw.value) for kw in node.keywords}
+    if isinstance(node, ast.Attribute):
+        parts = []
+        while isinstance(node, ast.Attribute):
+            parts.insert(0, node.attr)
+            node = node.value
+        if isinstance(node, ast.Name):
+            return _torch_attr([node.id] + parts)
+    raise ValueError(f"{ast.unparse(node)!r} is not allowed (only literals, lists, dict(...), "
+                     "{...} and torch classes such as nn.ReLU)")
+
+
+def parse_kwargs(text) -> dict | None:
+    """RL Zoo writes policy_kwargs / normalize as Python in strings: "dict(net_arch=[64],
+    activation_fn=nn.ReLU)".  Parsed safely (``_literal``: literals, dict(...), nn.X; never
+    eval); a dict is returned as is, None as {}, True as {} and False as None (normalize)."""
     if text is None or isinstance(text, dict):
         return dict(text or {})
     if isinstance(text, bool):
         return {} if text else None
-    node = ast.parse(str(text), mode="eval").body
-    if isinstance(node, ast.Call) and getattr(node.func, "id", "") == "dict":
-        return {kw.arg: ast.literal_eval(kw.value) if not isinstance(kw.value, ast.Call)
-                else parse_kwargs(ast.unparse(kw.value)) for kw in node.keywords}
-    return ast.literal_eval(node)
+    if not isinstance(text, str):
+        raise ValueError(f"must be a mapping or a string such as \"dict(a=1)\", got {text!r}")
+    try:
+        node = ast.parse(text.strip(), mode="eval").body
+    except SyntaxError as e:
+        raise ValueError(f"is not valid Python ({e.msg}): {text!r}") from None
+    value = _literal(node)
+    if isinstance(value, bool):
+        return {} if value else None
+    if not isinstance(value, dict) or not all(isinstance(k, str) for k in value):
+        raise ValueError(f"must give a dict with string keys, got {text!r}")
+    return value
+
+
+# ----------------------------------------------------------------- hyper-parameter checks
+#: RL Zoo keys the training script handles itself (the rest go to the algorithm's __init__)
+ZOO_KEYS = frozenset({"n_envs", "n_timesteps", "policy", "normalize", "env_kwargs",
+                      "noise_type", "noise_std"})
+#: keywords of the algorithms' __init__ that the script sets (or that YAML cannot express)
+_SET_BY_SCRIPT = {"env": "the env is built from --scene", "seed": "use --seed",
+                  "verbose": "set by the script", "device": "set by the script (cpu)",
+                  "tensorboard_log": "the run folder's tb/ is used",
+                  "_init_setup_model": "set by SB3", "action_noise": "use noise_type and noise_std",
+                  "rollout_buffer_class": "a Python class: not supported in the YAML",
+                  "replay_buffer_class": "a Python class: not supported in the YAML"}
+_INF = float("inf")
+#: ranges (lo, hi, lo_open, hi_open) of the numbers; applied to a schedule's initial value too
+RANGES = {"gamma": (0, 1, True, False), "gae_lambda": (0, 1, False, False),
+          "learning_rate": (0, _INF, True, True), "clip_range": (0, _INF, True, True),
+          "clip_range_vf": (0, _INF, True, True), "tau": (0, 1, True, False),
+          "ent_coef": (0, _INF, False, True), "vf_coef": (0, _INF, False, True),
+          "max_grad_norm": (0, _INF, True, True), "target_kl": (0, _INF, True, True),
+          "target_policy_noise": (0, _INF, False, True),
+          "target_noise_clip": (0, _INF, False, True), "noise_std": (0, _INF, False, True),
+          "n_envs": (1, 4096, False, False), "n_timesteps": (1, 10**12, False, False),
+          "n_steps": (1, _INF, False, True), "batch_size": (1, _INF, False, True),
+          "n_epochs": (1, _INF, False, True), "buffer_size": (1, _INF, False, True),
+          "learning_starts": (0, _INF, False, True), "gradient_steps": (-1, _INF, False, True),
+          "policy_delay": (1, _INF, False, True), "target_update_interval": (1, _INF, False, True),
+          "sde_sample_freq": (-1, _INF, False, True), "stats_window_size": (1, _INF, False, True),
+          "train_freq": (1, _INF, False, True)}
+NOISE_TYPES = ("normal", "ornstein-uhlenbeck")
+
+
+def _kinds(annotation) -> set:
+    """The value kinds an SB3 annotation allows: int, float, bool, str, none, dict, tuple,
+    schedule (a callable), class (a type)."""
+    import collections.abc
+    import types
+    import typing
+    origin = typing.get_origin(annotation)
+    if origin in (typing.Union, types.UnionType):
+        return set().union(*(_kinds(a) for a in typing.get_args(annotation)))
+    if annotation is type(None) or annotation is None:
+        return {"none"}
+    for t, kind in ((bool, "bool"), (int, "int"), (float, "float"), (str, "str")):
+        if annotation is t:
+            return {kind}
+    if annotation is dict or origin is dict:
+        return {"dict"}
+    if annotation is tuple or origin is tuple:
+        return {"tuple"}
+    if origin is type or annotation is type:
+        return {"class"}
+    if origin is collections.abc.Callable or annotation is collections.abc.Callable:
+        return {"schedule"}
+    return {"any"}
+
+
+def _in_range(key, x):
+    lo, hi, lo_open, hi_open = RANGES.get(key, (-_INF, _INF, True, True))
+    ok = (lo < x if lo_open else lo <= x) and (x < hi if hi_open else x <= hi)
+    if not ok or x != x:
+        lo_s = "(" if lo_open else "["
+        hi_s = ")" if hi_open else "]"
+        raise ValueError(f"hyper-parameter {key!r} must lie in {lo_s}{lo:g}, {hi:g}{hi_s}, "
+                         f"got {x!r}")
+    return x
+
+
+def _int(key, v):
+    """An integer (a float with an integer value too, for YAML's ``!!float 1e6``)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or (
+            isinstance(v, float) and not (v == v and abs(v) != _INF and v == int(v))):
+        raise ValueError(f"hyper-parameter {key!r} must be an integer, got {v!r}")
+    return _in_range(key, int(v))
+
+
+def _number(key, v):
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError(f"hyper-parameter {key!r} must be a number, got {v!r}")
+    return _in_range(key, float(v))
+
+
+def check_value(key: str, v, kinds: set):
+    """``v`` checked against the kinds an SB3 keyword allows (and ``RANGES``), converted
+    (an RL Zoo ``lin_<x>`` string to a linear schedule, a kwargs string to a dict)."""
+    if v is None and "none" in kinds:
+        return None
+    if "any" in kinds:
+        return v
+    if "class" in kinds and not kinds - {"class", "none"}:
+        raise ValueError(f"hyper-parameter {key!r} takes a Python class: not supported in the "
+                         "YAML")
+    if "bool" in kinds:
+        if not isinstance(v, bool):
+            raise ValueError(f"hyper-parameter {key!r} must be true or false, got {v!r}")
+        return v
+    if "schedule" in kinds and isinstance(v, str):
+        from stable_baselines3.common.utils import LinearSchedule
+        head, _, tail = v.partition("_")
+        try:
+            x = float(tail) if head == "lin" else None
+        except ValueError:
+            x = None
+        if x is None:
+            raise ValueError(f"hyper-parameter {key!r} must be a number or 'lin_<number>' (RL "
+                             f"Zoo's linear schedule), got {v!r}")
+        return LinearSchedule(_in_range(key, x), 0.0, 1.0)  # x * progress_remaining
+    if key == "ent_coef" and isinstance(v, str) and "str" in kinds:  # SAC: auto, auto_0.1
+        head, _, tail = v.partition("_")
+        try:
+            ok = head == "auto" and (not tail or float(tail) > 0)
+        except ValueError:
+            ok = False
+        if not ok:
+            raise ValueError(f"hyper-parameter 'ent_coef' must be a number, 'auto' or "
+                             f"'auto_<initial value>', got {v!r}")
+        return v
+    if key == "target_entropy" and isinstance(v, str):
+        if v != "auto":
+            raise ValueError(f"hyper-parameter 'target_entropy' must be a number or 'auto', "
+                             f"got {v!r}")
+        return v
+    if "tuple" in kinds and isinstance(v, (list, tuple)):
+        if not (len(v) == 2 and v[1] in ("step", "episode")):
+            raise ValueError(f"hyper-parameter {key!r} must be an integer or [n, 'step' | "
+                             f"'episode'], got {v!r}")
+        return (_int(key, v[0]), v[1])
+    if "dict" in kinds:
+        try:
+            return parse_kwargs(v) or {}
+        except ValueError as e:
+            raise ValueError(f"hyper-parameter {key!r}: {e}") from None
+    if "float" in kinds:
+        return _number(key, v)
+    if "int" in kinds:
+        return _int(key, v)
+    if "str" in kinds and isinstance(v, str):
+        return v
+    want = " or ".join(sorted(kinds - {"none"})) + (" or null" if "none" in kinds else "")
+    raise ValueError(f"hyper-parameter {key!r} must be {want}, got {v!r}")
+
+
+def _algo_class(algo: str):
+    import stable_baselines3 as sb3
+    return {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[algo]
+
+
+def check_hyperparams(algo: str, hp: dict) -> dict:
+    """Validate an entry of the hyper-parameter YAML for ``algo``: every key is either an RL
+    Zoo key the script handles (``ZOO_KEYS``) or a keyword of the algorithm's ``__init__``
+    (found with ``inspect.signature``), with a value of the type SB3 annotates and in
+    ``RANGES``; anything else raises a ValueError naming the key.  Returns
+    ``{"n_envs", "n_timesteps", "policy", "normalize" (dict or None), "env_kwargs",
+    "action_noise" (None or a (type, std) pair), "kwargs" (for the algorithm)}``;
+    ``n_timesteps`` is None when the entry has none."""
+    import inspect
+    import numbers
+    cls = _algo_class(algo)
+    params = inspect.signature(cls.__init__).parameters
+    unknown = sorted(k for k in hp if k not in ZOO_KEYS and k not in params or k == "self")
+    if unknown:
+        raise ValueError(f"unknown hyper-parameter(s) {', '.join(map(repr, unknown))} for "
+                         f"{cls.__name__} (keys: the RL Zoo keys {sorted(ZOO_KEYS)} and the "
+                         f"keywords of {cls.__name__}.__init__)")
+    out = {"n_envs": _int("n_envs", hp.get("n_envs", 1)),
+           "n_timesteps": (_int("n_timesteps", hp["n_timesteps"]) if "n_timesteps" in hp
+                           else None)}
+    policy = hp.get("policy", "MlpPolicy")
+    if policy != "MlpPolicy":
+        raise ValueError(f"hyper-parameter 'policy' must be 'MlpPolicy' (the observation is a "
+                         f"flat vector), got {policy!r}")
+    out["policy"] = policy
+    try:
+        norm = parse_kwargs(hp.get("normalize", False))
+    except ValueError as e:
+        raise ValueError(f"hyper-parameter 'normalize': {e}") from None
+    if norm is not None:
+        from stable_baselines3.common.vec_env import VecNormalize
+        allowed = set(inspect.signature(VecNormalize.__init__).parameters) - {
+            "self", "venv", "training", "gamma", "norm_obs_keys"}
+        bad = sorted(set(norm) - allowed)
+        if bad:
+            raise ValueError(f"hyper-parameter 'normalize': unknown key(s) {bad} (VecNormalize "
+                             f"takes {sorted(allowed)}; gamma is the algorithm's)")
+        for k, x in norm.items():
+            if k in ("norm_obs", "norm_reward") and not isinstance(x, bool):
+                raise ValueError(f"hyper-parameter 'normalize': {k} must be true or false, "
+                                 f"got {x!r}")
+            if k in ("clip_obs", "clip_reward", "epsilon") and (
+                    isinstance(x, bool) or not isinstance(x, numbers.Real) or not x > 0):
+                raise ValueError(f"hyper-parameter 'normalize': {k} must be a number > 0, got "
+                                 f"{x!r}")
+    out["normalize"] = norm
+    env_kwargs = hp.get("env_kwargs") or {}
+    if not isinstance(env_kwargs, dict):
+        raise ValueError(f"hyper-parameter 'env_kwargs' must be a mapping, got {env_kwargs!r}")
+    out["env_kwargs"] = dict(env_kwargs)
+    noise_type, noise_std = hp.get("noise_type"), hp.get("noise_std")
+    if noise_type is not None or noise_std is not None:
+        if "action_noise" not in params:
+            raise ValueError(f"hyper-parameter 'noise_type' / 'noise_std': {cls.__name__} takes "
+                             "no action noise")
+        if noise_type not in NOISE_TYPES:
+            raise ValueError(f"hyper-parameter 'noise_type' must be one of {NOISE_TYPES} (with "
+                             f"noise_std), got {noise_type!r}")
+        if noise_std is None:
+            raise ValueError("hyper-parameter 'noise_std' is required with noise_type")
+        out["action_noise"] = (noise_type, _number("noise_std", noise_std))
+    else:
+        out["action_noise"] = None
+    kwargs = {}
+    for k, v in hp.items():
+        if k in ZOO_KEYS:
+            continue
+        if k in _SET_BY_SCRIPT:
+            raise ValueError(f"hyper-parameter {k!r} cannot be set in the YAML: "
+                             f"{_SET_BY_SCRIPT[k]}")
+        kwargs[k] = check_value(k, v, _kinds(params[k].annotation))
+    if "policy_kwargs" in kwargs:
+        pol = cls.policy_aliases["MlpPolicy"]
+        allowed = set(inspect.signature(pol.__init__).parameters) - {
+            "self", "observation_space", "action_space", "lr_schedule", "use_sde"}
+        bad = sorted(set(kwargs["policy_kwargs"]) - allowed)
+        if bad:
+            raise ValueError(f"hyper-parameter 'policy_kwargs': unknown key(s) {bad} for "
+                             f"{pol.__name__} (allowed: {sorted(allowed)})")
+    out["kwargs"] = kwargs
+    return out
+
+
+def action_noise(spec, n_actions: int = 3):
+    """SB3 action noise from ``check_hyperparams``' ``(type, std)`` pair (None: none)."""
+    if spec is None:
+        return None
+    import numpy as np
+    from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
+    kind, std = spec
+    cls = NormalActionNoise if kind == "normal" else OrnsteinUhlenbeckActionNoise
+    return cls(np.zeros(n_actions), std * np.ones(n_actions))
 
 
 def make_vec_env(scene, n_envs: int, seed: int, env_kwargs: dict | None = None):
@@ -77,3 +375,73 @@ def save_model(model, vecnorm, folder: str | os.PathLike, name: str = "model") -
         setattr(vecnorm, SAVED_AT, int(model.num_timesteps))
         atomic_write(folder / f"{name}_vecnormalize.pkl", vecnorm.save)
     return atomic_write(folder / f"{name}.zip", model.save)
+
+
+# ----------------------------------------------------------------- scenes of runs
+def scene_fields(scene) -> dict:
+    """What a run was trained on: the checked Scene's fields (``load_scene``) except its name
+    and description, which change nothing in the env."""
+    import dataclasses
+
+    from rolling_env.scenes import Scene, load_scene
+    sc = scene if isinstance(scene, Scene) else load_scene(scene)
+    return {k: v for k, v in dataclasses.asdict(sc).items() if k not in ("name", "description")}
+
+
+def scene_digest(scene) -> str:
+    """SHA-256 (hex) of ``scene_fields``: equal digests, equal physics and task."""
+    import hashlib
+    import json
+    text = json.dumps(scene_fields(scene), sort_keys=True)  # floats as repr: exact
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def scene_key(scene) -> str:
+    """Key of a scene: in the hyper-parameter YAML, the run folders (``runs/<key>/``) and the
+    results tables.  A shipped scene's name; for a scene file, its stem, except where the
+    stem names a shipped scene whose content differs: then ``<stem>-<first 8 hex digits of
+    scene_digest>`` (a custom default.yaml with mu 0.01 is not ``default``).  A file that
+    cannot be read keeps its stem (loading it reports the error)."""
+    import rolling_env.scenes as scenes
+    p = Path(scene)
+    if p.suffix not in (".yaml", ".yml"):
+        return str(scene)
+    stem = p.stem
+    if stem in scenes.list_scenes():
+        try:
+            own = scene_digest(p)
+        except (ValueError, OSError):
+            return stem
+        if own != scene_digest(stem):
+            return f"{stem}-{own[:8]}"
+    return stem
+
+
+def differing_fields(a: dict, b: dict) -> str:
+    """``key a -> b`` for the fields where two ``scene_fields`` differ (for messages)."""
+    keys = sorted(set(a) | set(b))
+    diff = [f"{k} {a.get(k, '-')!r} vs {b.get(k, '-')!r}" for k in keys if a.get(k) != b.get(k)]
+    return ", ".join(diff[:6]) + (f" (+{len(diff) - 6} more)" if len(diff) > 6 else "")
+
+
+def buildable_scene(scene):
+    """The checked Scene, also checked to build (``load_scene`` bounds each key, but e.g. a
+    fine resolution over a long stroke needs more spring cells than the model allows): a
+    ValueError naming the scene keys where it does not."""
+    import re
+
+    from rolling_env.env import build_drive
+    from rolling_env.scenes import load_scene
+    sc = load_scene(scene)
+    name = str(scene) if isinstance(scene, (str, os.PathLike)) else sc.name
+    try:
+        build_drive(sc)
+    except ValueError as e:
+        m = re.search(r"would need (\d+) cells", str(e))
+        if m is None:
+            raise ValueError(f"scene {name!r} cannot be built: {e}") from None
+        raise ValueError(f"scene {name!r}: scene keys 'resolution' = {sc.resolution:g} (cells "
+                         f"per contact radius) and 'stroke_roll' = {sc.stroke_roll:g} m need "
+                         f"{m.group(1)} spring cells (at most 2e7): lower resolution or "
+                         "stroke_roll") from None
+    return sc

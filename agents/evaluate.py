@@ -2,7 +2,8 @@
 
     python -m agents.evaluate --scenes default resonant ... --runs runs/ --episodes 20
 
-Controllers: the two Eq. 32 baselines and every trained agent under ``<runs>/<scene>/*/``
+Controllers: the two Eq. 32 baselines and every trained agent under ``<runs>/<scene key>/*/``
+(``common.scene_key``; each run checked to be trained on the scene's content, ``check_run_scene``)
 (``agent_files``: EvalCallback's best model when its VecNormalize statistics were saved with
 it, else the final model, else the checkpoint, with the statistics saved beside it; a model
 whose statistics were saved at another step is skipped with a warning for the next one).  Writes ``results/comparison.md`` and ``results/comparison.csv``
@@ -23,10 +24,9 @@ import numpy as np
 
 import rolling_env
 from rolling_env.rollout import rollout
-from rolling_env.scenes import load_scene
 
 from .baselines import Eq32Design, Eq32Feedback, Eq32OpenLoop
-from .common import SAVED_AT, atomic_write
+from .common import SAVED_AT, atomic_write, buildable_scene
 
 EVAL_SEED = 20261122  # held out: training uses seeds < 1e6, evaluation envs seed + 10000
 
@@ -45,16 +45,51 @@ class NormalizedAgent:
                                   deterministic=deterministic)
 
 
+def model_algo(path) -> str:
+    """The algorithm (``ppo``, ``sac``, ``td3``) that saved an SB3 model .zip, read from the
+    zip's ``data`` JSON (the policy class's module and the algorithm's own saved attributes;
+    nothing is unpickled).  A ValueError naming the file where it cannot be told."""
+    import zipfile
+    path = Path(path)
+    try:
+        with zipfile.ZipFile(path) as z:
+            data = json.loads(z.read("data"))
+    except (OSError, KeyError, zipfile.BadZipFile, ValueError) as e:
+        raise ValueError(f"{str(path)!r} is not a Stable-Baselines3 model zip ({e})") from None
+    module = str((data.get("policy_class") or {}).get("__module__", "")) \
+        if isinstance(data.get("policy_class"), dict) else ""
+    for algo in ("sac", "td3", "ppo"):
+        if module.startswith(f"stable_baselines3.{algo}."):
+            return algo
+    if "policy_delay" in data or "target_policy_noise" in data:
+        return "td3"
+    if "target_entropy" in data or "ent_coef_optimizer" in data:
+        return "sac"
+    if module == "stable_baselines3.common.policies" and {"clip_range", "n_epochs"} <= set(data):
+        return "ppo"  # PPO's MlpPolicy is the common ActorCriticPolicy
+    raise ValueError(f"cannot tell which algorithm saved {str(path)!r} (policy class module "
+                     f"{module or 'missing'!r}; this script loads PPO, SAC and TD3 models)")
+
+
 def load_agent(path, env=None) -> NormalizedAgent:
     """Load ``<name>.zip`` and, if beside it, ``<name>_vecnormalize.pkl`` (observation
-    statistics applied, frozen).  The algorithm is read from the run's config.yml."""
+    statistics applied, frozen).  The algorithm is read from the zip (``model_algo``) and
+    checked against the run's config.yml where there is one.  A model without statistics is
+    refused where its run's config.yml says the run normalised observations, and loaded with
+    a warning where there is no config.yml to tell."""
     import stable_baselines3 as sb3
     import yaml
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
+    from .common import parse_kwargs
+
     path = Path(path)
-    cfg = path.parent / "config.yml"
-    algo = yaml.safe_load(cfg.read_text()).get("algo", "ppo") if cfg.exists() else "ppo"
+    cfg_path = path.parent / "config.yml"
+    cfg = (yaml.safe_load(cfg_path.read_text()) or {}) if cfg_path.exists() else None
+    algo = model_algo(path)
+    if cfg is not None and cfg.get("algo", algo) != algo:
+        raise ValueError(f"{path.name} was saved by {algo.upper()} but {cfg_path} says algo "
+                         f"{cfg.get('algo')!r}: the model does not belong to this run")
     cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[algo]
     model = cls.load(path, device="cpu")
     stats = path.with_name(path.stem + "_vecnormalize.pkl")
@@ -69,6 +104,19 @@ def load_agent(path, env=None) -> NormalizedAgent:
                              "files): they do not belong together; use another model of the run")
         vecnorm.training = False
         vecnorm.norm_reward = False
+    elif cfg is not None:
+        try:
+            norm = parse_kwargs(cfg.get("normalize", False))
+        except ValueError:
+            norm = {}
+        if norm is not None and norm.get("norm_obs", True):
+            raise ValueError(f"{path} has no {stats.name} beside it, but its run normalised "
+                             "observations (config.yml): without the statistics the agent "
+                             "would act on raw observations")
+    else:
+        print(f"warning: {path} has no {stats.name} beside it and no config.yml: observations "
+              "are fed unnormalised; if the run used VecNormalize (agents.train does by "
+              "default), copy its statistics beside the model", file=sys.stderr)
     return NormalizedAgent(model, vecnorm)
 
 
@@ -113,32 +161,60 @@ def episode_metrics(data: dict, tol: float) -> dict:
             "return": float(data["return"])}
 
 
-def _run_overrides(run: Path, scene: str) -> None:
-    """Refuse a run that was not trained on ``scene`` as it stands: another scene in its
-    config.yml, or scene overrides in its env_kwargs (an agent trained with mu = 0.02 would
-    be reported as if trained on the plain scene)."""
+def _stem(scene) -> str:
+    p = Path(str(scene))
+    return p.stem if p.suffix in (".yaml", ".yml") else str(scene)
+
+
+def check_run_scene(run: Path, scene, by_key: bool = True) -> None:
+    """Refuse a run that was not trained on ``scene`` as it stands: scene overrides in its
+    env_kwargs (an agent trained with mu = 0.02 would be reported as if trained on the plain
+    scene), scene content (``common.scene_digest``, recorded by agents.train) other than
+    ``scene``'s, and with ``by_key`` (evaluate: runs are tabulated by key) another scene key
+    (a scene file whose stem names a shipped scene but whose content differs has its own
+    key, ``common.scene_key``).  A run without a config.yml is not checked; one from before
+    the digest was recorded is checked by the scene's name, with a warning."""
     import yaml
 
-    from .train import scene_key
+    from rolling_env.scenes import Scene
+
+    from .common import differing_fields, scene_digest, scene_fields, scene_key
     cfg_path = run / "config.yml"
     if not cfg_path.exists():
         return
     cfg = yaml.safe_load(cfg_path.read_text()) or {}
     trained = cfg.get("scene")
-    if trained is not None and scene_key(str(trained)) != scene_key(scene):
-        raise ValueError(f"run {str(run)!r} was trained on scene {trained!r}, not {scene!r}: "
-                         "move it under its own scene's folder")
+    digest = cfg.get("scene_digest")
+    trained_key = cfg.get("scene_key", None if trained is None else _stem(trained))
+    if (by_key or digest is None) and trained_key is not None and not isinstance(scene, Scene):
+        key = scene_key(scene) if "scene_key" in cfg else _stem(scene)
+        if str(trained_key) != key:
+            raise ValueError(f"run {str(run)!r} was trained on scene {trained_key!r} "
+                             f"({trained}), not {key!r}: use it on its own scene (evaluate "
+                             f"looks for it under <runs>/{trained_key}/)")
+    name = scene.name if isinstance(scene, Scene) else str(scene)
     extra = {k: v for k, v in dict(cfg.get("env_kwargs") or {}).items() if k != "scene"}
     if extra:
         raise ValueError(f"run {str(run)!r} was trained with scene overrides {extra}: it is not "
-                         f"comparable on the plain scene {scene!r}; put the overrides in a "
+                         f"comparable on the plain scene {name!r}; put the overrides in a "
                          "scene file, train on it and evaluate that scene")
+    if digest is None:
+        print(f"warning: {run}/config.yml records no scene_digest (an older run): its scene "
+              f"is checked by name only", file=sys.stderr)
+    elif digest != scene_digest(scene):
+        diff = differing_fields(dict(cfg.get("scene_fields") or {}), scene_fields(scene))
+        raise ValueError(f"run {str(run)!r} was trained on a scene whose content differs from "
+                         f"{name!r} (trained vs now: {diff or 'scene digest differs'}): not "
+                         "comparable")
+
+
+_run_overrides = check_run_scene  # the earlier name
 
 
 def scene_runs(scene: str, runs: Path) -> list[Path]:
     """The run folders of a scene: ``<runs>/<scene key>/*/`` (the training script's layout;
     the key of a scene file is its stem)."""
-    from .train import scene_key
+    from .common import scene_key
     return sorted(p for p in (runs / scene_key(scene)).glob("*") if p.is_dir())
 
 
@@ -149,7 +225,7 @@ def controllers_for(scene: str, runs: Path, env) -> dict:
     for run in scene_runs(scene, runs):
         files = agent_files(run)
         if files:
-            _run_overrides(run, scene)
+            check_run_scene(run, scene)
         for k, model in enumerate(files):
             try:
                 agent = load_agent(model, env)
@@ -172,7 +248,7 @@ def evaluate_scene(scene: str, runs: Path, episodes: int, env=None,
     """Every controller on the scene's held-out targets (episode i: target i, seed
     EVAL_SEED + i).  Returns one row per controller and the trajectory of target 0 of each.
     ``env`` and ``ctrls`` (from ``controllers_for``) are built here when not given."""
-    from .train import scene_key
+    from .common import scene_key
     env = env if env is not None else rolling_env.make(scene)
     ctrls = ctrls if ctrls is not None else controllers_for(scene, runs, env)
     tol = env.unwrapped.scene.tolerance
@@ -335,7 +411,7 @@ def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path) -> Path:
     if ax[2].lines:
         ax[2].legend(fontsize=7)
     fig.tight_layout()
-    from .train import scene_key
+    from .common import scene_key
     path = atomic_write(out / "plots" / f"{scene_key(scene)}.png",
                         lambda p: fig.savefig(p, dpi=80, format="png"))
     plt.close(fig)
@@ -353,8 +429,8 @@ def main(argv=None):
     if args.episodes < 1:
         p.error(f"--episodes must be >= 1, got {args.episodes}")
     for scene in args.scenes:  # every scene checked before anything is written
-        try:
-            Eq32Design(load_scene(scene))  # the scene, and that the baselines can drive it
+        try:  # the scene, that it builds, and that the baselines can drive it
+            Eq32Design(buildable_scene(scene))
         except ValueError as e:
             p.error(f"--scenes: {e}")
     out, runs = Path(args.out), Path(args.runs)

@@ -3,7 +3,9 @@
     python -m agents.train --algo ppo --scene default --seed 0 [--n-timesteps N] [--n-envs N]
 
 Hyper-parameters come from ``configs/hyperparams/<algo>.yml`` (RL Zoo format, keyed by scene).
-The run folder (default ``runs/<scene>/<algo>_seed<seed>``) keeps config.yml, command.txt,
+The run folder (default ``runs/<scene key>/<algo>_seed<seed>``, ``common.scene_key``: the
+scene's name, a scene file's stem, or ``<stem>-<digest8>`` for a file named like a shipped
+scene with other content) keeps config.yml (with the scene's fields and digest), command.txt,
 meta.json (seed, package versions, env steps, wall time), the TensorBoard log (tb/), the
 EvalCallback log (evaluations.npz) and best model, periodic checkpoints, and the final
 model.zip with model_vecnormalize.pkl beside it.  Every file is written atomically; Ctrl-C or
@@ -28,19 +30,11 @@ import yaml
 
 from rolling_env.cli import positive_int
 
-from .common import ALGOS, atomic_write, load_hyperparams, make_vec_env, parse_kwargs, save_model
+from .common import (ALGOS, action_noise, atomic_write, buildable_scene, check_hyperparams,
+                     load_hyperparams, make_vec_env, save_model, scene_digest, scene_fields,
+                     scene_key)
 
 SEED_MAX = 2**31 - 1 - 10_000  # the evaluation env is seeded seed + 10000
-
-_ALGO_KEYS = {
-    "ppo": ("n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda", "learning_rate",
-            "ent_coef", "clip_range", "vf_coef", "max_grad_norm"),
-    "sac": ("learning_rate", "buffer_size", "batch_size", "learning_starts", "gamma", "tau",
-            "train_freq", "gradient_steps", "ent_coef"),
-    "td3": ("learning_rate", "buffer_size", "batch_size", "learning_starts", "gamma", "tau",
-            "train_freq", "gradient_steps", "policy_delay"),
-}
-
 
 def build_parser():
     p = argparse.ArgumentParser(prog="python -m agents.train", description=__doc__.splitlines()[0])
@@ -52,7 +46,7 @@ def build_parser():
     p.add_argument("--n-envs", type=positive_int("n-envs", 1, 4096), default=None,
                    help="override the YAML n_envs")
     p.add_argument("--conf", default=None, help="hyper-parameter YAML (default configs/...)")
-    p.add_argument("--run-dir", default=None, help="run folder (default runs/<scene>/<algo>_seed<seed>); "
+    p.add_argument("--run-dir", default=None, help="run folder (default runs/<scene key>/<algo>_seed<seed>); "
                    "a folder that already holds files is refused unless --overwrite")
     p.add_argument("--overwrite", action="store_true",
                    help="replace an existing run folder created by this script and holding "
@@ -119,25 +113,28 @@ class UsageError(ValueError):
 def _setup(args):
     """Hyper-parameters, envs (the scene checked) and the model; then the run folder with its
     config, so that a bad scene or hyper-parameter leaves nothing behind."""
-    import numpy as np
     import stable_baselines3 as sb3
-    from stable_baselines3.common.noise import NormalActionNoise
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecNormalize
 
     scene = args.scene
-    hp = load_hyperparams(args.algo, scene_key(scene), args.conf)
-    n_envs = int(args.n_envs if args.n_envs is not None else hp.get("n_envs", 1))
-    n_timesteps = int(args.n_timesteps if args.n_timesteps is not None
-                      else float(hp["n_timesteps"]))
-    env_kwargs = dict(hp.get("env_kwargs") or {})
-    if n_envs < 1 or n_timesteps < 1:
-        raise ValueError(f"n_envs and n_timesteps must be >= 1 (from {args.conf or 'the YAML'}),"
-                         f" got {n_envs} and {n_timesteps}")
+    buildable_scene(scene)  # the scene checked, and that it builds (a one-line error if not)
+    key = scene_key(scene)
+    hp = load_hyperparams(args.algo, key, args.conf)
+    if args.n_timesteps is None and "n_timesteps" not in hp:
+        raise KeyError("n_timesteps")
+    checked = check_hyperparams(args.algo, hp)  # every key used or refused, naming it
+    n_envs = args.n_envs if args.n_envs is not None else checked["n_envs"]
+    n_timesteps = args.n_timesteps if args.n_timesteps is not None else checked["n_timesteps"]
+    env_kwargs = checked["env_kwargs"]
     set_random_seed(args.seed)
-    env = make_vec_env(scene, n_envs, args.seed, env_kwargs)
+    try:
+        env = make_vec_env(scene, n_envs, args.seed, env_kwargs)
+    except ValueError as e:  # scene overrides in env_kwargs
+        raise ValueError(f"hyper-parameter 'env_kwargs': {e}") from None
+    trained = env.venv.core.scene  # with the overrides of env_kwargs applied
     eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs)
-    run = Path(args.run_dir or f"runs/{scene_key(scene)}/{args.algo}_seed{args.seed}")
+    run = Path(args.run_dir or f"runs/{key}/{args.algo}_seed{args.seed}")
     replace = False
     if run.is_symlink() or (run.exists() and (not run.is_dir() or any(run.iterdir()))):
         # a second run into the same folder would mix its files with the first's (and its
@@ -150,29 +147,33 @@ def _setup(args):
             raise UsageError(f"--overwrite replaces only a run folder written by this script; "
                              f"{str(run)!r} {why}: nothing was deleted")
         replace = True
-    norm = parse_kwargs(hp.get("normalize", False))
+    norm = checked["normalize"]
     if norm is not None:
-        env = VecNormalize(env, gamma=float(hp.get("gamma", 0.99)), **norm)
+        env = VecNormalize(env, gamma=float(checked["kwargs"].get("gamma", 0.99)), **norm)
         eval_env = VecNormalize(eval_env, training=False, norm_reward=False,
                                 norm_obs=norm.get("norm_obs", True))
-    kwargs = {k: hp[k] for k in _ALGO_KEYS[args.algo] if k in hp}
-    if args.algo == "td3" and hp.get("noise_type") == "normal":
-        kwargs["action_noise"] = NormalActionNoise(np.zeros(3),
-                                                   float(hp["noise_std"]) * np.ones(3))
+    kwargs = dict(checked["kwargs"])
+    kwargs.pop("policy_kwargs", None)
+    if checked["action_noise"] is not None:
+        kwargs["action_noise"] = action_noise(checked["action_noise"])
     cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[args.algo]
-    model = cls(hp.get("policy", "MlpPolicy"), env, seed=args.seed, verbose=0, device="cpu",
+    model = cls(checked["policy"], env, seed=args.seed, verbose=0, device="cpu",
                 tensorboard_log=str(run / "tb"),
-                policy_kwargs=parse_kwargs(hp.get("policy_kwargs")), **kwargs)
+                policy_kwargs=checked["kwargs"].get("policy_kwargs"), **kwargs)
     if replace:  # checked by _not_a_run above; an empty folder is simply used
         shutil.rmtree(run)
     run.mkdir(parents=True, exist_ok=True)
     atomic_write(run / RUN_MARKER, lambda p: Path(p).write_text(
         "a run folder of agents.train: --overwrite may replace it\n"))
-    cfg = dict(hp, n_envs=n_envs, n_timesteps=n_timesteps, algo=args.algo, scene=scene,
-               seed=args.seed)
+    # what the run was trained on, for evaluate and rollout to check: the scene as given, its
+    # key (runs/<key>/), and the checked scene's fields with their digest (a scene file's
+    # stem alone does not say what was in it)
+    cfg = dict(hp, n_envs=n_envs, n_timesteps=n_timesteps, algo=args.algo, scene=str(scene),
+               seed=args.seed, env_kwargs=dict(env_kwargs, scene=str(scene)), scene_key=key,
+               scene_digest=scene_digest(trained), scene_fields=scene_fields(trained))
     atomic_write(run / "config.yml", lambda p: Path(p).write_text(yaml.safe_dump(cfg)))
     atomic_write(run / "command.txt", lambda p: Path(p).write_text(" ".join(sys.argv) + "\n"))
-    return model, eval_env, run, n_envs, n_timesteps
+    return model, eval_env, run, n_envs, n_timesteps, trained
 
 
 RUN_MARKER = "rolling-drive-run.txt"  # written when the script creates a run folder
@@ -224,7 +225,7 @@ def train(args) -> Path:
 
     torch.set_num_threads(1)
     try:  # an error while learning is not a usage error: it propagates with its traceback
-        model, eval_env, run, n_envs, n_timesteps = _setup(args)
+        model, eval_env, run, n_envs, n_timesteps, trained = _setup(args)
     except KeyError as e:
         raise UsageError(f"hyper-parameter {e.args[0]!r} missing from "
                          f"{args.conf or 'configs/hyperparams'}") from e
@@ -258,7 +259,9 @@ def train(args) -> Path:
     save_model(model, model.get_vec_normalize_env(), run,
                "checkpoint" if interrupted else "model")
     meta = {
-        "algo": args.algo, "scene": scene, "seed": args.seed, "env_steps": int(model.num_timesteps),
+        "algo": args.algo, "scene": str(scene), "scene_key": scene_key(scene),
+        "scene_digest": scene_digest(trained), "seed": args.seed,
+        "env_steps": int(model.num_timesteps),
         "wall_seconds": wall, "interrupted": interrupted, "n_envs": n_envs,
         "rolling_drive": rolling_env.__version__, "stable_baselines3": sb3.__version__,
         "torch": torch.__version__, "python": platform.python_version(),
@@ -273,12 +276,6 @@ def train(args) -> Path:
 
 class Interrupted(Exception):
     """Training stopped by SIGINT/SIGTERM after its checkpoint was saved; args[0] = exit code."""
-
-
-def scene_key(scene: str) -> str:
-    """Key of a scene in the hyper-parameter YAML: its name, or the stem of a scene file."""
-    p = Path(scene)
-    return p.stem if p.suffix in (".yaml", ".yml") else scene
 
 
 def main(argv=None):

@@ -109,9 +109,22 @@ def plot(data: dict, path: str | os.PathLike, title: str = "") -> Path:
     return path
 
 
-def make_controller(name: str, env, seed=0):
+def controller_label(name: str) -> str:
+    """A controller's part of output file names: its name, or for a model .zip its run
+    folder and file stem (``runs/default/ppo_seed0/model.zip`` -> ``ppo_seed0-model``), so
+    that the models of two runs never write the same files."""
+    p = Path(name)
+    if p.suffix != ".zip":
+        return name
+    run = p.resolve().parent.name
+    return f"{run}-{p.stem}" if run else p.stem
+
+
+def make_controller(name: str, env, seed=0, scene=None):
     """``random``, ``zero``, ``eq32``, ``eq32-feedback`` or a path to an SB3 model .zip
-    (trained by ``agents.train``; its VecNormalize statistics are applied if present)."""
+    (trained by ``agents.train``; its VecNormalize statistics are applied if present).  A
+    model whose run folder's config.yml says it was trained on another scene than ``scene``
+    (as given: name or path; default the env's scene, compared by content) is refused."""
     if name == "random":
         return RandomController(env.action_space, seed)
     if name == "zero":
@@ -121,7 +134,9 @@ def make_controller(name: str, env, seed=0):
         cls = baselines.Eq32OpenLoop if name == "eq32" else baselines.Eq32Feedback
         return cls.from_env(env)
     if name.endswith(".zip") and Path(name).exists():
-        from agents.evaluate import load_agent
+        from agents.evaluate import check_run_scene, load_agent
+        check_run_scene(Path(name).parent, env.unwrapped.scene if scene is None else scene,
+                        by_key=False)  # by content: a copy of a scene under another name is fine
         return load_agent(name, env)
     raise ValueError(f"controller must be random, zero, eq32, eq32-feedback or an existing "
                      f"model .zip, got {name!r}")

@@ -28,8 +28,9 @@ from gymnasium.utils import seeding
 
 from . import _envkernel as EK
 from . import _kernel as K
-from .env import (OBS_NAMES, build_drive, check_action_dtype, check_time_limit, info_arrays,
-                  info_dict, load_actions, raise_step_error, sample_target, target_option)
+from .env import (OBS_NAMES, build_drive, check_action_dtype, check_actions, check_time_limit,
+                  info_arrays, info_dict, load_actions, raise_step_error, sample_target,
+                  target_option)
 from .scenes import load_scene
 
 PARALLEL_MIN_ENVS = 4
@@ -206,7 +207,9 @@ class RollingDriveVectorEnv(_gym_vector_base()):
         return m.copy()
 
     def step(self, actions):
-        actions = check_action_dtype(actions)  # the rest is checked by core.step
+        actions = check_action_dtype(actions)  # range and finiteness are checked by core.step
+        if actions.shape != (self.num_envs, 3):  # before np.where below could broadcast it
+            check_actions(actions, (self.num_envs, 3))  # raises naming the shape
         was_done = self._autoreset.copy()
         obs, rew, trunc = self.core.step(np.where(was_done[:, None], 0.0, actions)
                                          if was_done.any() else actions)
@@ -292,8 +295,12 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
     # (``BatchCore.PER_ENV``: ``target``, ``steps``, ``rngs``, ...) is read and written per
     # index; anything else is shared by the batch and read for every index; of the shared
     # attributes only ``SHARED_WRITABLE`` can be written, for all envs at once (the scene,
-    # its kernel constants and the batch size are fixed at construction).
+    # its kernel constants and the batch size are fixed at construction).  Of the per-env
+    # state only ``PER_ENV_WRITABLE`` can be written, each value checked: the physics state
+    # (spring row, runner, observation, ...) is what the kernel made of the actions, and a
+    # written value would be a state no episode reaches (reset the env to start over).
     SHARED_WRITABLE = frozenset({"max_episode_steps"})
+    PER_ENV_WRITABLE = frozenset({"target", "steps", "rngs"})
 
     def _per_env(self, attr_name) -> bool:
         return attr_name in BatchCore.PER_ENV
@@ -313,10 +320,27 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
         if not hasattr(self.core, attr_name):
             raise AttributeError(f"RollingDriveVecEnv has no attribute {attr_name!r}")
         idx = list(self._get_indices(indices))
+        if self._per_env(attr_name) and attr_name not in self.PER_ENV_WRITABLE:
+            raise AttributeError(f"{attr_name!r} is per-env physics state, read-only (reset the "
+                                 "env to start it over); writable per env: "
+                                 f"{sorted(self.PER_ENV_WRITABLE)}, shared: "
+                                 f"{sorted(self.SHARED_WRITABLE)}")
         if attr_name == "max_episode_steps":
             value = check_time_limit(value, self.core.scene)
         elif attr_name == "target":  # the same check as reset(options={"target": ...})
             value = target_option(self.core.scene, {"target": value})
+        elif attr_name == "steps":  # ticks into the episode: the env truncates at the limit
+            limit = self.core.max_episode_steps
+            if (isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral)
+                    or not 0 <= value < limit):
+                raise ValueError(f"steps must be an integer in [0, {limit - 1}] (ticks into the "
+                                 f"episode, below max_episode_steps = {limit}), got {value!r}")
+            value = int(value)
+        elif attr_name == "rngs":  # the env's random generator (reset draws targets from it)
+            if not isinstance(value, np.random.Generator):
+                raise ValueError("rngs must be a numpy.random.Generator (e.g. "
+                                 "numpy.random.default_rng(seed); or use seed()), got "
+                                 f"{type(value).__name__}")
         if self._per_env(attr_name):
             target = getattr(self.core, attr_name)
             if isinstance(target, list):
@@ -329,7 +353,7 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
             # setting them would leave the physics on the old values (or the arrays too short)
             raise AttributeError(f"{attr_name!r} is fixed when the batch is built (make a new "
                                  f"env to change it); writable: {sorted(self.SHARED_WRITABLE)} "
-                                 f"and per env {sorted(BatchCore.PER_ENV)}")
+                                 f"and per env {sorted(self.PER_ENV_WRITABLE)}")
         elif sorted(idx) == list(range(self.num_envs)):
             setattr(self.core, attr_name, value)
         else:
@@ -337,11 +361,15 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
                                       "set it for all envs (indices=None)")
 
     def env_method(self, method_name, *method_args, indices=None, **method_kwargs):
-        """Call a ``BatchCore`` method once for the batch.  A method with a ``mask`` argument
-        (``reset``) gets the mask of ``indices``; others need every env (indices=None)."""
+        """Call a ``BatchCore`` method once for the batch.  ``reset`` acts as the single env's
+        ``reset(seed=None, options=None)`` on the envs of ``indices`` and returns their
+        ``(obs, info)`` (as DummyVecEnv does); another method with a ``mask`` argument gets the
+        mask of ``indices``; others need every env (indices=None)."""
         import inspect
-        fn = getattr(self.core, method_name)
         idx = list(self._get_indices(indices))
+        if method_name == "reset":
+            return self._reset_envs(idx, *method_args, **method_kwargs)
+        fn = getattr(self.core, method_name)
         if "mask" in inspect.signature(fn).parameters:
             mask = np.zeros(self.num_envs, dtype=bool)
             mask[idx] = True
@@ -352,6 +380,18 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
             raise NotImplementedError(f"BatchCore.{method_name} acts on the whole batch; call "
                                       "it for all envs (indices=None)")
         return [result for _ in idx]
+
+    def _reset_envs(self, idx, seed=None, options=None) -> list:
+        """``env.reset(seed=seed, options=options)`` of each env in ``idx`` (every one seeded
+        ``seed``, as DummyVecEnv's env_method does); returns one ``(obs, info)`` per env."""
+        mask = np.zeros(self.num_envs, dtype=bool)
+        mask[idx] = True
+        self.core.check_options(options, np.flatnonzero(mask))  # before the seeds change
+        if seed is not None:
+            s = _check_seed(seed, "seed")
+            self.core.seed([s if m else None for m in mask])
+        self.core.reset(mask, options)
+        return [(self.core.obs[i].copy(), self.core.info(i)) for i in idx]
 
     def env_is_wrapped(self, wrapper_class, indices=None):
         return [False for _ in self._get_indices(indices)]

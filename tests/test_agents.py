@@ -460,7 +460,10 @@ def test_evaluate_finds_the_runs_of_a_scene_file(trained_run, tmp_path):
 
 @pytest.mark.parametrize("edit,match", [
     (lambda c: c.update(env_kwargs={"scene": "x", "mu": 0.02}), r"scene overrides \{'mu': 0.02\}"),
-    (lambda c: c.update(scene="resonant"), "was trained on scene 'resonant'"),
+    (lambda c: c.update(scene="resonant", scene_key="resonant"),
+     "was trained on scene 'resonant'"),
+    (lambda c: (c.update(scene="resonant"), c.pop("scene_key")),  # a run from before the key
+     "was trained on scene 'resonant'"),
 ])
 def test_evaluate_refuses_runs_not_trained_on_the_scene(trained_run, tmp_path, capsys, edit,
                                                         match):
@@ -517,3 +520,250 @@ def test_mismatched_model_and_statistics_are_refused(trained_run, tmp_path, caps
     (run / "checkpoint.zip").unlink()
     with pytest.raises(ValueError, match="model_vecnormalize.pkl was saved at step"):
         controllers_for(str(scene), tmp_path / "runs", env)  # nothing left to fall back to
+
+
+def _scene_file(path, base="default", **changes):
+    data = yaml.safe_load((rolling_env.scenes.SCENE_DIR / f"{base}.yaml").read_text())
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(yaml.safe_dump({**data, **changes}))
+    return path
+
+
+def test_custom_scene_file_named_like_a_shipped_one_is_not_taken_for_it(tmp_path, monkeypatch,
+                                                                       capsys):
+    """A scene file named default.yaml with other content (mu 0.01, runner_mass 1e-4) was
+    trained into runs/default/, recorded as env_kwargs {scene: default} and evaluated as a
+    `default` agent: it gets its own key default-<digest8>, its config records the scene's
+    fields and digest, and evaluate refuses it on the shipped default (by key, and by
+    content where the key was edited by hand)."""
+    import shutil
+
+    from agents.common import scene_digest, scene_key
+    from agents.evaluate import main as evaluate_main
+    from agents.train import main as train_main
+    custom = _scene_file(tmp_path / "mine" / "default.yaml", mu=0.01, runner_mass=1e-4)
+    key = scene_key(str(custom))
+    assert key == f"default-{scene_digest(custom)[:8]}", key
+    assert scene_key(str(rolling_env.scenes.SCENE_DIR / "default.yaml")) == "default", (
+        "the shipped file itself keeps its name")
+    monkeypatch.chdir(tmp_path)
+    assert train_main(["--algo", "ppo", "--scene", str(custom), "--n-timesteps", "64",
+                       "--n-envs", "1", "--eval-freq", "64", "--eval-episodes", "1",
+                       "--no-progress"]) == 0
+    assert not (tmp_path / "runs" / "default").exists(), "landed in runs/default/ silently"
+    run = tmp_path / "runs" / key / "ppo_seed0"
+    cfg = yaml.safe_load((run / "config.yml").read_text())
+    assert cfg["scene_key"] == key and cfg["scene_digest"] == scene_digest(custom), cfg
+    assert cfg["scene_fields"]["mu"] == 0.01 and cfg["scene_fields"]["runner_mass"] == 1e-4
+    assert cfg["env_kwargs"] == {"scene": str(custom)}, (
+        f"config.yml must name the scene file trained on, got {cfg['env_kwargs']}")
+    shutil.copytree(run, tmp_path / "runs" / "default" / "ppo_seed0")  # moved by hand
+    argv = ["--scenes", "default", "--runs", str(tmp_path / "runs"), "--episodes", "1",
+            "--out", str(tmp_path / "out")]
+    with pytest.raises(SystemExit) as e:
+        evaluate_main(argv)
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and f"was trained on scene {key!r}" in err, err
+    moved = tmp_path / "runs" / "default" / "ppo_seed0" / "config.yml"
+    moved.write_text(yaml.safe_dump(dict(cfg, scene_key="default")))  # the key edited too
+    with pytest.raises(SystemExit) as e:
+        evaluate_main(argv)
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "content differs" in err and "mu 0.01 vs 0.2" in err, err
+    assert not (tmp_path / "out" / "comparison.csv").exists()
+
+
+def test_evaluate_refuses_a_run_whose_scene_file_changed(trained_run, tmp_path, capsys):
+    """The scene file a run was trained on, edited afterwards (same stem, same folder
+    layout): refused naming the key that changed, not evaluated as if trained on it."""
+    import shutil
+
+    from agents.evaluate import main as evaluate_main
+    scene, runs = trained_run
+    shutil.copytree(runs, tmp_path / "runs")
+    edited = _scene_file(tmp_path / "scenes" / "myscene.yaml", base="heavy_inf_friction",
+                         runner_mass=0.01)
+    with pytest.raises(SystemExit) as e:
+        evaluate_main(["--scenes", str(edited), "--runs", str(tmp_path / "runs"),
+                       "--episodes", "1", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "content differs" in err and "runner_mass" in err, err
+
+
+def test_rollout_cli_refuses_a_model_of_another_scene_and_names_files_by_run(trained_run,
+                                                                             tmp_path, capsys):
+    """`rolling-drive rollout --controller <run>/model.zip --scene X` refuses a model whose
+    run was trained on other scene content (exit 2, one line); a copy of the scene under
+    another name is the same scene.  Output files are named from the run folder: two runs'
+    model.zip no longer write the same <scene>_model_seed0.csv."""
+    import shutil
+
+    from rolling_env.cli import main as cli_main
+    scene, runs = trained_run
+    model = runs / "myscene" / "ppo_seed0" / "model.zip"
+    assert cli_main(["rollout", "--scene", "default", "--controller", str(model),
+                     "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("rolling-drive rollout: error:") and err.count("\n") == 1, err
+    assert "content differs" in err and "mu" in err, err
+    other = tmp_path / "runs" / "sac_seed0"
+    shutil.copytree(model.parent, other)
+    for m in (model, other / "model.zip"):
+        assert cli_main(["rollout", "--scene", "heavy_inf_friction", "--controller", str(m),
+                         "--out", str(tmp_path / "out"), "--json"]) == 0, capsys.readouterr()
+    names = sorted(p.name for p in (tmp_path / "out").glob("*.csv"))
+    assert names == ["heavy_inf_friction_ppo_seed0-model_seed0.csv",
+                     "heavy_inf_friction_sac_seed0-model_seed0.csv"], names
+
+
+@pytest.mark.parametrize("entry,name", [
+    ({"n_epoch": 1, "learning_rte": 0.5}, "'learning_rte', 'n_epoch'"),
+    ({"n_envs": 2.7}, "'n_envs' must be an integer"),
+    ({"n_timesteps": 300.9}, "'n_timesteps' must be an integer"),
+    ({"gamma": 1.5}, "'gamma' must lie in (0, 1]"),
+    ({"learning_rate": -1e-3}, "'learning_rate' must lie in (0, inf)"),
+    ({"learning_rate": "lin_x"}, "'learning_rate' must be a number or 'lin_<number>'"),
+    ({"n_steps": "many"}, "'n_steps' must be an integer"),
+    ({"use_sde": "yes"}, "'use_sde' must be true or false"),
+    ({"policy_kwargs": "dict(activation_fn=os.system)"}, "'policy_kwargs'"),
+    ({"policy_kwargs": "__import__('os').getcwd()"}, "'policy_kwargs'"),
+    ({"policy_kwargs": "dict(net_arch=[64], nett=1)"}, "'policy_kwargs': unknown key(s) ['nett']"),
+    ({"normalize": "{'norm_obs': True, 'clip_ob': 5}"}, "'normalize': unknown key(s) ['clip_ob']"),
+    ({"noise_type": "normal", "noise_std": 0.1}, "PPO takes no action noise"),
+    ({"seed": 1}, "'seed' cannot be set in the YAML"),
+    ({"policy": "CnnPolicy"}, "'policy' must be 'MlpPolicy'"),
+    ({"env_kwargs": {"scene": "default", "bogus": 1}}, "'env_kwargs': unknown scene key 'bogus'"),
+])
+def test_train_validates_every_hyperparameter(entry, name, tmp_path, capsys):
+    """Unknown or misspelled keys were ignored, fractional n_envs / n_timesteps truncated,
+    gamma 1.5 trained: each is one line, exit 2, naming the key, with no run folder."""
+    from agents.train import main as train_main
+    conf = tmp_path / "ppo.yml"
+    conf.write_text(yaml.safe_dump({"default": {"n_envs": 1, "n_timesteps": 64, **entry}}))
+    assert train_main(["--algo", "ppo", "--conf", str(conf), "--run-dir", str(tmp_path / "run"),
+                       "--no-progress"]) == 2, f"{entry} was accepted"
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and name in err, f"{entry}: {err}"
+    assert not (tmp_path / "run").exists()
+
+
+def test_td3_ornstein_uhlenbeck_noise_is_rejected_or_used(tmp_path, capsys):
+    """noise_type ornstein-uhlenbeck trained TD3 with no noise at all: it is used now; an
+    unknown noise type is refused naming noise_type."""
+    from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
+
+    from agents.train import _setup, build_parser
+    from agents.train import main as train_main
+    conf = tmp_path / "td3.yml"
+    entry = {"n_envs": 1, "n_timesteps": 64, "noise_type": "ornstein-uhlenbeck",
+             "noise_std": 0.2, "target_policy_noise": 0.1, "learning_starts": 8,
+             "replay_buffer_kwargs": "dict(handle_timeout_termination=True)"}
+    conf.write_text(yaml.safe_dump({"default": entry}))
+    args = build_parser().parse_args(["--algo", "td3", "--conf", str(conf), "--run-dir",
+                                      str(tmp_path / "run"), "--no-progress"])
+    model = _setup(args)[0]
+    assert isinstance(model.action_noise, OrnsteinUhlenbeckActionNoise), model.action_noise
+    assert np.allclose(model.action_noise._sigma, 0.2)
+    assert model.target_policy_noise == 0.1 and model.learning_starts == 8
+    conf.write_text(yaml.safe_dump({"default": dict(entry, noise_type="ou")}))
+    assert train_main(["--algo", "td3", "--conf", str(conf), "--run-dir",
+                       str(tmp_path / "run2"), "--no-progress"]) == 2
+    assert "'noise_type' must be one of" in capsys.readouterr().err
+
+
+def test_rl_zoo_strings_and_sb3_keywords_reach_the_model(tmp_path):
+    """Valid PPO keywords outside the old hard-coded list (target_kl, clip_range_vf,
+    normalize_advantage, ...) were dropped silently; RL Zoo's lin_<x> schedules and
+    nn.ReLU in policy_kwargs failed.  They all reach the model now."""
+    import torch
+
+    from agents.train import _setup, build_parser
+    conf = tmp_path / "ppo.yml"
+    conf.write_text(yaml.safe_dump({"default": {
+        "n_envs": 1, "n_timesteps": 64, "n_steps": 32, "batch_size": 32,
+        "target_kl": 0.02, "clip_range_vf": 0.3, "normalize_advantage": False,
+        "learning_rate": "lin_3e-4", "clip_range": "lin_0.2",
+        "policy_kwargs": "dict(net_arch=[16], activation_fn=nn.ReLU)"}}))
+    args = build_parser().parse_args(["--algo", "ppo", "--conf", str(conf), "--run-dir",
+                                      str(tmp_path / "run"), "--no-progress"])
+    model = _setup(args)[0]
+    assert model.target_kl == 0.02 and model.normalize_advantage is False
+    assert model.clip_range_vf(1.0) == 0.3
+    assert model.lr_schedule(0.5) == pytest.approx(1.5e-4), "lin_3e-4 at half-way"
+    assert model.clip_range(0.25) == pytest.approx(0.05)
+    assert model.policy.activation_fn is torch.nn.ReLU and model.policy.net_arch == [16]
+
+
+@pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
+def test_a_loose_model_zip_is_loaded_with_its_own_algorithm(algo, tmp_path, capsys):
+    """A model .zip without its run's config.yml was loaded as PPO (a loose SAC zip gave a
+    traceback): the algorithm is read from the zip, and the missing VecNormalize statistics
+    are warned about; the rollout CLI runs it."""
+    import stable_baselines3 as sb3
+
+    from agents.evaluate import model_algo
+    from rolling_env.cli import main as cli_main
+    from rolling_env.vector import RollingDriveVecEnv
+    cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[algo]
+    path = tmp_path / "loose" / f"{algo}_model.zip"
+    path.parent.mkdir()
+    cls("MlpPolicy", RollingDriveVecEnv(1), device="cpu", **(
+        {"buffer_size": 100} if algo != "ppo" else {})).save(path)
+    assert model_algo(path) == algo
+    agent = load_agent(path, rolling_env.make("default"))
+    assert type(agent.model) is cls, f"loaded as {type(agent.model).__name__}"
+    assert f"has no {algo}_model_vecnormalize.pkl beside it" in capsys.readouterr().err
+    assert cli_main(["rollout", "--scene", "default", "--controller", str(path), "--out",
+                     str(tmp_path / "out"), "--json"]) == 0
+    assert (tmp_path / "out" / f"default_loose-{algo}_model_seed0.csv").exists()
+
+
+def test_a_zip_that_is_no_sb3_model_is_one_line(tmp_path, capsys):
+    import zipfile
+
+    from agents.evaluate import model_algo
+    from rolling_env.cli import main as cli_main
+    junk = tmp_path / "junk.zip"
+    junk.write_text("not a zip")
+    assert cli_main(["rollout", "--controller", str(junk), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is not a Stable-Baselines3 model zip" in err, err
+    odd = tmp_path / "odd.zip"
+    with zipfile.ZipFile(odd, "w") as z:
+        z.writestr("data", json.dumps({"policy_class": {"__module__": "mypkg.policies"}}))
+    with pytest.raises(ValueError, match="cannot tell which algorithm saved"):
+        model_algo(odd)
+
+
+def test_a_run_model_without_its_statistics_is_refused(trained_run, tmp_path):
+    """A run that normalised observations (config.yml) but whose model lost its VecNormalize
+    statistics would act on raw observations: refused, naming the missing file."""
+    import shutil
+    scene, runs = trained_run
+    run = tmp_path / "ppo_seed0"
+    shutil.copytree(runs / "myscene" / "ppo_seed0", run)
+    (run / "model_vecnormalize.pkl").unlink()
+    with pytest.raises(ValueError, match="has no model_vecnormalize.pkl beside it, but its "
+                       "run normalised observations"):
+        load_agent(run / "model.zip", rolling_env.make(str(scene)))
+
+
+def test_a_scene_that_cannot_be_built_is_one_line_naming_its_keys(tmp_path, capsys):
+    """A scene that passes load_scene but needs more spring cells than the model allows
+    (resolution 4096 over stroke_roll 0.9 m) crashed evaluate with a traceback: exit 2, one
+    line naming the scene keys, nothing written; train says the same."""
+    from agents.evaluate import main as evaluate_main
+    from agents.train import main as train_main
+    huge = _scene_file(tmp_path / "huge.yaml", resolution=4096, stroke_roll=0.9)
+    with pytest.raises(SystemExit) as e:
+        evaluate_main(["--scenes", str(huge), "--runs", str(tmp_path / "runs"),
+                       "--episodes", "1", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert e.value.code == 2, err
+    last = err.strip().splitlines()[-1]
+    assert "'resolution' = 4096" in last and "'stroke_roll' = 0.9" in last, err
+    assert not (tmp_path / "out").exists()
+    assert train_main(["--algo", "ppo", "--scene", str(huge), "--run-dir",
+                       str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "'resolution' = 4096" in err, err

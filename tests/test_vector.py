@@ -305,3 +305,67 @@ def test_num_envs_must_be_a_positive_integer(bad):
 def test_sb3_vecenv_render_mode_named():
     with pytest.raises(ValueError, match="render_mode must be None"):
         RollingDriveVecEnv(2, render_mode="rgb_array")
+
+
+def test_gymnasium_vector_env_checks_the_action_shape_while_an_env_is_pending_autoreset():
+    """A (3,) or (1, 3) action for 2 envs is refused on every step, also on the step where an
+    env is pending autoreset (np.where broadcast it to both envs there)."""
+    venv = gym.make_vec("RollingDrive-v0", num_envs=2, episode_steps=2,
+                        vectorization_mode="vector_entry_point")
+    venv.reset(seed=0)
+    for _ in range(2):
+        venv.step(np.zeros((2, 3), np.float32))
+    assert venv.unwrapped._autoreset.any(), "setup: an env must be pending autoreset"
+    for bad in (np.full(3, 0.5, np.float32), np.full((1, 3), 0.5, np.float32)):
+        with pytest.raises(ValueError, match=r"action must have shape \(2, 3\)"):
+            venv.step(bad)
+
+
+@pytest.mark.parametrize("name,value,match", [
+    ("steps", -5, r"steps must be an integer in \[0, 511\]"),
+    ("steps", 2.5, "steps must be an integer"),
+    ("steps", 512, r"steps must be an integer in \[0, 511\]"),
+    ("rngs", 5, "rngs must be a numpy.random.Generator"),
+    ("U", 0.0, "'U' is per-env physics state, read-only"),
+    ("obs", 0.0, "'obs' is per-env physics state, read-only"),
+])
+def test_sb3_set_attr_checks_per_env_state(name, value, match):
+    """Per-env state other than target was written unchecked (steps -5 accepted, rngs 5
+    failed later at reset): checked values, or a refusal naming the attribute; nothing
+    changes on a refusal."""
+    v = RollingDriveVecEnv(2)
+    v.reset()
+    before = [np.copy(x) if isinstance(x, np.ndarray) else x for x in v.get_attr(name)]
+    with pytest.raises((ValueError, AttributeError), match=match):
+        v.set_attr(name, value, indices=[0])
+    after = v.get_attr(name)
+    assert all(a is b or np.array_equal(a, b) for a, b in zip(after, before)), f"{name} changed"
+    v.set_attr("steps", 3, indices=[1])
+    assert v.core.steps.tolist() == [0, 3]
+    rng = np.random.default_rng(1)
+    v.set_attr("rngs", rng, indices=[0])
+    assert v.core.rngs[0] is rng
+
+
+def test_sb3_env_method_reset_returns_obs_and_info_like_dummy_vec_env():
+    """env_method("reset", indices=[i]) returns [(obs_i, info_i)] as SB3's DummyVecEnv does
+    (it returned [None]), and takes the single env's seed and options."""
+    from stable_baselines3.common.vec_env import DummyVecEnv
+    kw = dict(scene="resonant", episode_steps=6)
+    a = RollingDriveVecEnv(3, **kw)
+    b = DummyVecEnv([lambda: rolling_env.make(**kw) for _ in range(3)])
+    for v in (a, b):
+        v.seed(3)
+        v.reset()
+        v.step(np.full((3, 3), 0.3, np.float32))
+    for args, kwargs in (((), {}), ((), {"seed": 7}), ((), {"options": {"target": 2e-7}})):
+        ra = a.env_method("reset", *args, indices=[1, 2], **kwargs)
+        rb = b.env_method("reset", *args, indices=[1, 2], **kwargs)
+        assert len(ra) == len(rb) == 2
+        for (oa, ia), (ob, ib) in zip(ra, rb):
+            np.testing.assert_array_equal(oa, ob, err_msg=f"reset obs differ ({kwargs})")
+            assert ia.keys() == ib.keys() and all(np.array_equal(ia[k], ib[k]) for k in ia), (
+                f"reset infos differ ({kwargs}): {ia} vs {ib}")
+    sa = a.step(np.full((3, 3), 0.1, np.float32))
+    sb = b.step(np.full((3, 3), 0.1, np.float32))
+    np.testing.assert_array_equal(sa[0], sb[0], err_msg="steps after the resets differ")

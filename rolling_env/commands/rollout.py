@@ -25,7 +25,7 @@ def register(sub):
 
 def _run(args):
     import rolling_env
-    from ..rollout import make_controller, plot, rollout, write_csv
+    from ..rollout import controller_label, make_controller, plot, rollout, write_csv
 
     from ..env import target_option
 
@@ -35,9 +35,9 @@ def _run(args):
         target_option(env.unwrapped.scene, asked)
     except ValueError as e:
         raise ValueError(str(e).replace("options['target']", "--target")) from None
-    ctrl = make_controller(args.controller, env, seed=args.seed)
+    ctrl = make_controller(args.controller, env, seed=args.seed, scene=args.scene)
     data = rollout(env, ctrl, seed=args.seed, target=args.target)
-    stem = f"{env.unwrapped.scene.name}_{Path(args.controller).stem}_seed{args.seed}"
+    stem = f"{env.unwrapped.scene.name}_{controller_label(args.controller)}_seed{args.seed}"
     out = Path(args.out)
     csv_path = write_csv(data, out / f"{stem}.csv")
     png_path = plot(data, out / f"{stem}.png",
