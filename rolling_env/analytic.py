@@ -19,8 +19,16 @@ W_MAX = 1e15  # largest rolling amplitude w = W/a1 taken (far beyond any drive; 
 # ----------------------------------------------------------------------------- validation
 def _arr(name, x, lo=-np.inf, hi=np.inf, lo_open=False, hi_open=False):
     """``x`` as a float64 array, checked to be finite and in the interval [lo, hi]
-    (ends open where asked)."""
-    a = np.asarray(x, dtype=np.float64)
+    (ends open where asked); strings, booleans, complex numbers and other non-real input are
+    a ValueError naming the parameter."""
+    try:
+        raw = np.asarray(x)
+    except (TypeError, ValueError):  # ragged nested sequences
+        raise ValueError(f"{name} must be a real number or array of them, got {x!r}") from None
+    if raw.dtype.kind not in "fiu":
+        raise ValueError(f"{name} must be a real number or array of them, got {x!r} (dtype "
+                         f"{raw.dtype})")
+    a = raw.astype(np.float64)
     bad = ~np.isfinite(a) | (a < lo) | (a > hi)
     if lo_open:
         bad |= a == lo

@@ -65,7 +65,7 @@ class RollingDriveEnv(gym.Env):
     | 3   | translate_pos     | integral v dt / stroke_translate  (in [-1, 1])              |
     | 4   | normal_force      | N / N_max                                                  |
     | 5   | tangential_force  | T / T_ref, T_ref = min(mu N_max, 2 a_max G* creep_max stroke_roll) |
-    | 6   | stick_fraction    | stuck share of the contact length (1 with mu = inf)        |
+    | 6   | stick_fraction    | share of the contact not slipping now (1 with mu = inf)    |
     | 7   | clock_sin         | sin(2 pi t / period)  (nominal excitation clock)           |
     | 8   | clock_cos         | cos(2 pi t / period)                                       |
     | 9   | time_fraction     | step / episode_steps                                       |

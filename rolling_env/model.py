@@ -20,9 +20,19 @@ from .validation import check_range
 _INF = math.inf
 
 
+SLIDE_MESSAGE = ("the massless runner (m = 0) has no force equilibrium: |F_ext| exceeds the "
+                 "largest force the contact holds (mu N with finite friction, 0 without contact)"
+                 "; the runner would accelerate without bound.  Give it a finite mass m > 0, or "
+                 "keep |F_ext| below mu N with the contact closed")
+
+
 def check_flags(st) -> None:
-    """Raise for the kernel's error flags in a state vector or a batch of them (rows)."""
+    """Raise for the kernel's error flags in a state vector or a batch of them (rows):
+    the grid flag (RuntimeError), a massless runner without force equilibrium (ValueError,
+    ``SLIDE_MESSAGE``) and a non-finite value (FloatingPointError)."""
     flags = np.bitwise_or.reduce(np.atleast_2d(st)[:, K.ST_FLAG].astype(np.int64))
+    if flags & K.FLAG_SLIDE:
+        raise ValueError(SLIDE_MESSAGE)
     if flags & K.FLAG_GRID:
         raise RuntimeError("the contact left the spring row: the rolling stroke exceeded the "
                            "grid built for it (enlarge `stroke`)")
@@ -39,7 +49,10 @@ class DriveParams:
     G_star   effective shear modulus G* [Pa]
     mu       Coulomb friction coefficient [-]; ``inf`` = no slip checks at all
     m        runner mass [kg]; ``inf`` = prescribed runner velocity, ``0`` = massless runner
-    F_ext    constant external force on the runner [N] (positive along v*)
+             (force equilibrium T + F_ext = 0 at every instant)
+    F_ext    constant external force on the runner [N] (positive along v*); needs m < inf.
+             With m = 0 it must stay within what the contact holds (|F_ext| <= mu N, and no
+             lift-off): where it does not, no equilibrium exists and ``Drive.run`` raises.
     """
 
     R: float
@@ -60,9 +73,6 @@ class DriveParams:
         }
         for name, value in checked.items():  # store the checked floats (not "1e-3" strings)
             object.__setattr__(self, name, value)
-        if self.m == 0.0 and self.F_ext != 0.0:
-            raise ValueError("F_ext must be 0 for a massless runner (m = 0): a load on a "
-                             "massless runner has no equilibrium once the contact slides")
         if math.isinf(self.m) and self.F_ext != 0.0:
             raise ValueError("F_ext needs a finite runner mass m (a prescribed runner ignores loads)")
 
@@ -127,6 +137,7 @@ class Drive:
             raise ValueError(f"params must be a DriveParams, got {type(params).__name__}")
         stroke = _check_stroke(stroke)
         self.params = params
+        self.stroke = stroke
         self.L0 = float(a_ref)
         self.t0 = float(t_ref)
         self.F0 = params.G_star * self.L0 ** 2
@@ -147,6 +158,7 @@ class Drive:
         self._mu = params.mu if finite_mu else None
         self._mass = params.m / self.M0 if free else None
         self._load = params.F_ext / self.F0 if load else None
+        self._check_scales()
         self.U = np.zeros(n)
         self.A = np.zeros(n)
         self.B = np.zeros(n)
@@ -155,6 +167,33 @@ class Drive:
         self.st = np.zeros(K.N_STATE)
         self.ledger = True  # run() keeps the impulse and energy ledger; the env kernel does not
 
+    def _check_scales(self):
+        """The kernel works in units of a_ref, t_ref and G* a_ref^2: every scale and scaled
+        parameter must be a finite normal float, else ValueError naming it (e.g. G_star = 1e-300
+        makes E*/G* overflow; the outputs would come back inf or 0)."""
+        p = self.params
+        tiny = np.finfo(np.float64).tiny
+        scales = {
+            "E_star/G_star": self._p[K.P_E_OVER_G],
+            "R/a_ref": self._p[K.P_R],
+            "the force unit G_star a_ref^2": self.F0,
+            "the mass unit G_star a_ref t_ref^2": self.M0,
+            "the energy unit G_star a_ref^3": self.W0,
+        }
+        if self._mass is not None and p.m > 0.0:
+            scales["m/(G_star a_ref t_ref^2)"] = self._mass
+        if self._load is not None:
+            scales["|F_ext|/(G_star a_ref^2)"] = abs(self._load)
+        for name, x in scales.items():
+            if not (math.isfinite(x) and x >= tiny):
+                raise ValueError(
+                    f"{name} = {x:.3g} leaves the normal float range (finite and >= {tiny:.3g}):"
+                    f" the kernel's scaled arithmetic would overflow or underflow; choose R, "
+                    f"E_star, G_star, m, F_ext, a_ref and t_ref of compatible sizes (got R = "
+                    f"{p.R:g} m, E_star = {p.E_star:g} Pa, G_star = {p.G_star:g} Pa, m = "
+                    f"{p.m:g} kg, F_ext = {p.F_ext:g} N, a_ref = {self.L0:g} m, t_ref = "
+                    f"{self.t0:g} s)")
+
     @property
     def kernel_features(self):
         """(mu, mass, load) as the kernel takes them: None where the feature is absent."""
@@ -162,10 +201,16 @@ class Drive:
 
     # ------------------------------------------------------------------ state
     def reset(self, c0: float = 0.0, vstar0: float = 0.0) -> None:
-        """Release every spring, patch centre at c0 [m] (inside the stroke the grid covers),
-        runner at rest or at vstar0 [m/s] (finite)."""
-        c_lo, c_hi = self.grid.c_min * self.L0, self.grid.c_max * self.L0
-        check_range("c0", c0, min(c_lo, 0.0), max(c_hi, 0.0))
+        """Release every spring, patch centre at c0 [m] (inside the stroke the grid was built
+        for: the default 0 only where the stroke contains it), runner at rest or at vstar0
+        [m/s] (finite)."""
+        c_lo, c_hi = self.stroke
+        try:
+            check_range("c0", c0, c_lo, c_hi)
+        except ValueError as e:
+            raise ValueError(f"{e}: the patch centre must start inside the stroke the spring row "
+                             "was built for (pass c0 inside it, or build the Drive with a stroke "
+                             "that contains c0)") from None
         check_range("vstar0", vstar0, -_INF, _INF, lo_open=True, hi_open=True)
         self.U[:] = 0.0
         self.st[:] = 0.0
@@ -176,9 +221,25 @@ class Drive:
         return self.U.copy(), self.st.copy()
 
     def set_state(self, state) -> None:
-        U, st = state
-        self.U[:] = U
-        self.st[:] = st
+        """Restore a state from ``get_state`` of a drive with the same grid: a pair (U, st) of
+        finite float arrays of shapes (n cells,) and (N_STATE,); else ValueError."""
+        try:
+            U, st = state
+        except (TypeError, ValueError):
+            raise ValueError("state must be the pair (U, st) that get_state returns, got "
+                             f"{type(state).__name__}") from None
+        arrs = {}
+        for name, x, shape in (("U", U, self.U.shape), ("st", st, self.st.shape)):
+            a = np.asarray(x)
+            if a.dtype.kind not in "fiu" or a.shape != shape:
+                raise ValueError(f"state {name} must be a real array of shape {shape} (this "
+                                 f"drive's grid), got dtype {a.dtype} and shape {a.shape}")
+            a = a.astype(np.float64)
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"state {name} must be finite (got NaN or inf)")
+            arrs[name] = a
+        self.U[:] = arrs["U"]
+        self.st[:] = arrs["st"]
 
     # ------------------------------------------------------------------ stepping
     def run(self, *, dt_tick: float, n_sub: int, omega_R, v, N=None, d=None, vstar=None):
@@ -186,8 +247,18 @@ class Drive:
 
         Give the normal force ``N`` [N] or the indentation ``d`` [m] per tick, the signed
         rolling rate ``omega_R`` [m/s] and translation rate ``v`` [m/s] per tick, and the
-        runner velocity ``vstar`` [m/s] per tick when the runner is prescribed (m = inf).
-        Returns a dict of per-tick arrays in SI (see ``_kernel.OUT_*``).
+        runner velocity ``vstar`` [m/s] per tick when the runner is prescribed (m = inf; a free
+        runner takes none).
+        Returns a dict of per-tick arrays in SI (see ``_kernel.OUT_*``), all finite (an
+        overflow is a FloatingPointError): T, impulse, vstar, xstar, slip_work, c, N and
+        ``stick_fraction``, the share of the contact length whose cells are below their
+        friction limit after the tick's last sub-step ("not slipping now"; 1 with mu = inf
+        while in contact).  It counts cells (edge cells by overlap), so it converges at first
+        order in dx at best, and it is not the Cattaneo-Mindlin stick zone of the loading
+        history: a partly slipping contact that comes to rest unloads from its limits and
+        reads 1.0.
+        A massless runner (m = 0) under a load with no force equilibrium (|F_ext| above mu N,
+        or any load without contact) raises ValueError.
         """
         check_range("dt_tick", dt_tick, 0.0, _INF, lo_open=True, hi_open=True)
         n_sub = check_n_sub(n_sub)
@@ -210,6 +281,10 @@ class Drive:
                 raise ValueError("vstar is required for a prescribed runner (m = inf)")
             vs = _as_ticks("vstar", vstar, k)
         else:
+            if vstar is not None:
+                raise ValueError(f"vstar is only for a prescribed runner (m = inf); this runner "
+                                 f"is free (m = {self.params.m:g} kg) and its velocity follows "
+                                 "from the runner equation: leave vstar out")
             vs = np.zeros(k)
         a_max = float(np.sqrt(self.params.R * dd.max())) / self.L0 if k else 0.0
         if a_max > self.grid.a_max * (1 + 1e-9):
@@ -221,11 +296,34 @@ class Drive:
                            dd / self.L0, u * ts, vv * ts, vs * ts,
                            self._mu, self._mass, self._load, int(n_sub),
                            dt_tick / n_sub / self.t0, out)
-        self._check_flags()
-        return self._to_si(out[:done])
+        try:
+            self._check_flags()
+        except ValueError as e:  # no force equilibrium: say with which numbers
+            N_lo = float(4.0 / 3.0 * self.params.E_star * math.sqrt(self.params.R)
+                         * dd.min() ** 1.5) if k else 0.0
+            raise ValueError(f"{e} (F_ext = {self.params.F_ext:g} N, mu = {self.params.mu:g}, "
+                             f"least normal force of this run N = {N_lo:.6g} N)") from None
+        res = self._to_si(out[:done])
+        self._check_finite(res, dt_tick)
+        return res
 
     def _check_flags(self):
         check_flags(self.st)
+
+    def _check_finite(self, res, dt_tick):
+        """Every returned array and the state (ledger included) must be finite: a float
+        overflow in the kernel's arithmetic (a huge dt_tick, rate or load) is a
+        FloatingPointError naming what overflowed, never a NaN or inf handed back."""
+        bad = [k for k, a in res.items() if not np.all(np.isfinite(a))]
+        if not np.all(np.isfinite(self.st)):
+            bad.append("the state / energy ledger")
+        if not np.all(np.isfinite(self.U)):
+            bad.append("the cell deflections")
+        if bad:
+            raise FloatingPointError(
+                f"Drive.run overflowed the float range in {', '.join(bad)} (dt_tick = "
+                f"{dt_tick:g} s): reduce dt_tick, the rates omega_R, v, vstar or the load "
+                "F_ext; the drive's state is no longer valid (reset() it)")
 
     def _to_si(self, out):
         F0, L0, t0 = self.F0, self.L0, self.t0
@@ -346,7 +444,14 @@ def _check_stroke(stroke) -> tuple[float, float]:
 
 
 def _as_ticks(name, x, k=None):
-    a = np.atleast_1d(np.asarray(x, dtype=np.float64))
+    try:
+        raw = np.asarray(x)
+    except (TypeError, ValueError):  # ragged nested sequences
+        raise ValueError(f"{name} must be a number or a 1-D array of numbers, got {x!r}") from None
+    if raw.dtype.kind not in "fiu":  # strings, booleans, complex, objects
+        raise ValueError(f"{name} must be a number or a 1-D array of real numbers, got "
+                         f"{x!r} (dtype {raw.dtype})")
+    a = np.atleast_1d(raw.astype(np.float64))
     if a.ndim != 1:
         raise ValueError(f"{name} must be a scalar or 1-D array of per-tick values")
     if k is not None:

@@ -154,9 +154,16 @@ def validate(scene: Scene) -> Scene:
     if not lo <= s.E_star / s.G_star <= hi:
         raise ValueError(f"scene keys 'E_star' and 'G_star' must have a ratio E_star/G_star in "
                          f"[{lo:g}, {hi:g}], got {s.E_star / s.G_star:.3g}")
-    if s.runner_mass == 0.0 and s.F_ext != 0.0:
-        raise ValueError("scene key 'F_ext' must be 0 when runner_mass is 0 (a loaded massless "
-                         "runner has no equilibrium once the contact slides)")
+    if s.runner_mass == 0.0 and s.F_ext != 0.0 and not abs(s.F_ext) < s.mu * s.N_min:
+        # a massless runner under load is in equilibrium only while the contact holds the load
+        # (|F_ext| <= mu N); the env kernel does not report the sliding case (it would step on
+        # with a meaningless velocity), so a scene must exclude it for every action: the least
+        # force the contact can hold is mu N_min
+        raise ValueError(f"scene key 'F_ext' must satisfy |F_ext| < mu N_min = "
+                         f"{s.mu * s.N_min:.6g} N when runner_mass is 0, got {s.F_ext:g} N (a "
+                         "loaded massless runner has no force equilibrium once the contact "
+                         "slides, and the env cannot report that case): give the runner a "
+                         "mass > 0, raise N_min or mu, or lower |F_ext|")
     a_max = math.sqrt(s.R * (3 * s.N_max / (4 * s.E_star * math.sqrt(s.R))) ** (2 / 3))
     if a_max > 0.5 * s.R:
         raise ValueError(f"scene keys 'N_max', 'E_star' and 'R' give a contact radius "

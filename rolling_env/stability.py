@@ -121,12 +121,20 @@ def _sim(delta, eps, w, r, mu=math.inf, periods=20, quasi_static=False, note="")
         if math.isinf(r):
             parts.append("massless runner: force equilibrium, follows the sphere, no net "
                          "motion")
-        elif r > 100:
-            parts.append("runner period not resolved (default sub-steps resolve omega_n/Omega "
-                         "<= 100): the implicit step gives the massless limit, runner follows "
-                         "the sphere")
-        elif r >= 2:
-            parts.append("runner follows the sphere, drive collapses")
+        elif not res["step_converged"]:
+            nrp = res["runner_steps_per_period"]
+            if r > ex.RUNNER_CAPPED_MAX:
+                parts.append(f"runner period not resolved ({nrp:.2g} sub-steps per runner "
+                             f"period; the default resolves omega_n/Omega <= "
+                             f"{ex.RUNNER_CAPPED_MAX:g}): the implicit step gives the massless "
+                             "limit, runner follows the sphere")
+            else:
+                parts.append(f"runner period resolved by only {nrp:.3g} sub-steps (the "
+                             f"default caps them above omega_n/Omega = "
+                             f"{ex.RUNNER_RESOLVED_MAX:g}): mean v* not guaranteed converged "
+                             "in the step")
+        elif r >= 2 and ref is not None:
+            parts.append(f"stiff runner: {v / ref:.2g} x {ref_name}")
         elif ref is not None and 0.5 <= r <= 2 and v > ref:
             parts.append("resonant band: above the quasi-static value")
         if rel > 0.1:
@@ -429,8 +437,9 @@ def report(rows) -> str:
         "the 4x-step repeat).  Unless a case says otherwise: delta 0.7, w 2.5, omega_n/Omega "
         "0.3, eps 0.1 with mu = inf and eps 0.995 with finite mu, 64 springs per a1, 20 "
         "periods, the default sub-steps of `experiments.default_substeps` (the patch moves at "
-        "most one cell per sub-step, 1/16 cell with finite friction; at least 40 sub-steps per "
-        "runner period up to omega_n/Omega = 100).", "",
+        "most one cell per sub-step, 1/16 cell with finite friction; 32768 min(1, (r/2)^2) "
+        "sub-steps per runner period at omega_n/Omega = r <= 10, capped at the r = 10 count "
+        "up to r = 100, not resolved above).", "",
         "Criteria (PASS needs all):",
         "* **finite**: every output of every tick finite, no exception;",
         f"* **energy residual** = (work in - elastic - released - slip - snap - kinetic) / work "

@@ -3,13 +3,18 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 
 def check_range(name: str, value, lo: float, hi: float, *, lo_open: bool = False,
                 hi_open: bool = False, allow_inf: bool = False) -> float:
     """Return ``float(value)`` or raise ValueError naming ``name`` and the allowed range.
 
-    NaN is always rejected; +inf only with ``allow_inf``.
+    NaN is always rejected; +inf only with ``allow_inf``; booleans too (``True`` is not the
+    number 1.0 here: a flag passed where a number belongs is a mistake).
     """
+    if isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be a number, got the boolean {value!r}")
     try:
         x = float(value)
     except (TypeError, ValueError):

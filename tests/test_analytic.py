@@ -276,3 +276,32 @@ def test_error_message_gives_range():
         an.eq32(1.3, 0.1, 2.5)
     with pytest.raises(ValueError, match=r"ratio must be in the reachable range \[0, 0.9\]"):
         an.invert_eq32_delta(0.95, 0.1, 2.5)
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda: an.eq32("a", 0.1, 2.5), "delta"),
+    (lambda: an.eq32(0.5, None, 2.5), "eps"),
+    (lambda: an.eq29(0.5, [0.1, "x"]), "eps"),
+    (lambda: an.eq32(True, 0.1, 2.5), "delta"),
+    (lambda: an.hertz_force(1e-7, 1e-3, 1 + 2j), "E_star"),
+    (lambda: an.working_point_ratio(0.5, 0.1, [[2.5], [2.5, 3.0]]), "w"),
+])
+def test_non_numeric_input_names_the_parameter(call, name):
+    """Strings, None, booleans, complex numbers and ragged lists are a ValueError naming the
+    parameter (a string gave numpy's 'could not convert string to float', which names none)."""
+    with pytest.raises(ValueError, match=f"^{name} must be a real number"):
+        call()
+
+
+@pytest.mark.parametrize("eps", [-0.5, 0.1, 0.9, 1.7])
+@pytest.mark.parametrize("w", [1.0, 1.5, 2.0, 5.0])
+def test_delta_zero_gives_one_minus_eps_everywhere(eps, w):
+    """delta = 0 (no back-step contact) is inside every working-point formula: Eq. 29, Eq. 32
+    and the w < 2 corrected ratio all give 1 - eps to 1e-14 (the runner follows the sphere);
+    inverting Eq. 32 at ratio 1 - eps gives delta = 0 back."""
+    assert abs(an.eq29(0.0, eps) - (1 - eps)) < 1e-14
+    assert abs(an.working_point_ratio(0.0, eps, w) - (1 - eps)) < 1e-14
+    if w >= 2:
+        assert abs(an.eq32(0.0, eps, w) - (1 - eps)) < 1e-14
+        if eps != 1:
+            assert an.invert_eq32_delta(1 - eps, eps, w) < 1e-12

@@ -112,3 +112,15 @@ def test_library_errors_exit_2_in_one_line(argv, name, tmp_path, capsys):
     err = capsys.readouterr().err
     assert name in err and len(err.strip().splitlines()) == 1, err
     assert f.read_text() == "keep"
+
+
+@pytest.mark.parametrize("eps", [0.1, -0.4])
+def test_delta_zero_accepted_and_gives_one_minus_eps(eps, capsys):
+    """--delta 0 (no back-step contact) is a valid input (it was refused as outside (0, 1]):
+    working-point gives v*/(omega R) = 1 - eps (Eq. 32 at delta = 0) to 1e-9, and simulate
+    runs (heavy runner: the zero-impulse velocity, the same 1 - eps to 1e-9)."""
+    r = _json(capsys, "working-point", "--delta", "0", "--eps", str(eps), "--w", "2.5", "--json")
+    assert abs(r["simulated"] - (1 - eps)) < 1e-9 and abs(r["eq32"] - (1 - eps)) < 1e-15, r
+    r = _json(capsys, "simulate", "--delta", "0", "--eps", str(eps), "--w", "2.5",
+              "--omega-n-ratio", "0", "--periods", "4", "--json")
+    assert abs(r["mean_v_star_over_omega_R"] - (1 - eps)) < 1e-9, r

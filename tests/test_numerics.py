@@ -90,6 +90,33 @@ def test_dynamic_run_converges_in_dt_at_first_order():
     assert 0.7 < p < 1.6, f"observed order in dt {p:.2f}: {vals}"
 
 
+def test_default_substeps_converge_the_stiff_runner():
+    """omega_n/Omega = 3 (the worst measured case of ``default_substeps``, infinite friction,
+    40 periods): the default is within its stated 1% of the converged mean velocity.  The
+    error is first order in the step, so the default's error is 4/3 of its distance to a run
+    at 4x the sub-steps (measured 0.6%, i.e. 0.8%; the old 40 sub-steps per runner period
+    were 126% off)."""
+    a = ex.simulate(0.7, 0.1, 2.5, 3.0, periods=40)
+    b = ex.simulate(0.7, 0.1, 2.5, 3.0, periods=40, n_sub=4 * a["n_sub"])
+    va, vb = a["mean_v_star_over_omega_R"], b["mean_v_star_over_omega_R"]
+    assert a["step_converged"] and b["step_converged"]
+    assert 4 / 3 * abs(va - vb) <= ex.STEP_TOL_REL * abs(vb), f"default {va} vs 4x {vb}"
+
+
+def test_unresolved_runner_period_is_reported():
+    """A run whose runner period gets fewer sub-steps than the default asks for says so:
+    a coarse ``n_sub``, the cap above omega_n/Omega = 10, no resolution above 100."""
+    coarse = ex.simulate(0.7, 0.1, 2.5, 3.0, periods=2, n_sub=160)
+    assert not coarse["step_converged"] and "not converged" in coarse["step_note"]
+    assert coarse["runner_steps_per_period"] == pytest.approx(160 * 2 / 3)
+    for r, word in ((20.0, "capped"), (1e3, "massless")):
+        res = ex.simulate(0.7, 0.1, 2.5, r, periods=2)
+        assert not res["step_converged"] and word in res["step_note"], res["step_note"]
+    for r in (0.0, 0.3, math.inf):
+        res = ex.simulate(0.7, 0.1, 2.5, r, periods=2)
+        assert res["step_converged"] and res["step_note"] == "", (r, res["step_note"])
+
+
 def test_energy_ledger_closes_in_full_sliding():
     """Full sliding (mu = 1e-4, eps = 0.1): the released energy of sliding edge cells is booked
     at the friction limit, so the ledger closes to 1% at the default sub-steps."""

@@ -55,8 +55,8 @@ def register(sub):
 
 
 def _dimensionless(p):
-    p.add_argument("--delta", type=finite_float("delta", 0, 1, lo_open=True), required=True,
-                   help="d2/d1 in (0, 1]")
+    p.add_argument("--delta", type=finite_float("delta", 0, 1), required=True,
+                   help="d2/d1 in [0, 1] (0: no contact in the back step)")
     p.add_argument("--eps", type=finite_float("eps", -1e3, 1e3), required=True,
                    help="v/(omega R)")
     p.add_argument("--w", type=finite_float("w", 0, 1e4, lo_open=True), required=True,
@@ -92,6 +92,8 @@ def _simulate(args):
     human = (f"mean v*/(omega R) {r['mean_v_star_over_omega_R']:.6f} (Eq. 32: {eq})  slip work/"
              f"period {r['slip_work']:.3e} [2 G* a1^3]  energy residual {r['energy_residual']:.2e}"
              f"  [{r['seconds']:.3f} s, {r['n_sub']} sub-steps per half period]")
+    if r.get("step_note"):
+        human += f"\nnote: {r['step_note']}"
     emit(r, args.json, human)
     return 0
 
