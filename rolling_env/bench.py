@@ -21,8 +21,11 @@ import time
 import numpy as np
 
 CPU_HZ_FALLBACK = 3.0e9  # when /proc/cpuinfo gives no clock
-FP_PER_CYCLE = 4  # scalar double-precision operations per cycle (2 add + 2 mul pipes, no SIMD)
+FP_PER_CYCLE = 4  # double-precision vector operations per cycle (2 add + 2 mul/FMA pipes)
 STORES_PER_CYCLE = 2  # two store ports (AMD Zen 4/5, Intel since Ice Lake)
+# doubles per vector operation: the inner-cell loops are vectorised (_kernel._FM_INNER); Zen 4's
+# pipes are 256 bits wide (it splits AVX-512 in two halves), so 4 doubles
+SIMD_DOUBLES = 4
 # the minimal update of one cell inside the contact per sub-step (build + commit, see
 # _kernel._tick): with friction the friction limit (a quadratic, 13 operations), clip and slope
 # (4), content and sums (6), commit with clip, slip and sums (13), storing A, L and U;
@@ -112,10 +115,11 @@ def _vec_rate(env, n_envs, ticks, step, seed=0, repeats=3):
 
 def _limit(finite_mu: bool) -> float:
     """Rough machine limit in cell updates/s: the core clock over the cycles one cell update
-    needs at best, the larger of its FP operations / FP_PER_CYCLE and its stores /
-    STORES_PER_CYCLE."""
+    needs at best, the larger of its FP operations / (FP_PER_CYCLE x SIMD_DOUBLES) and its
+    stores / (STORES_PER_CYCLE x SIMD_DOUBLES)."""
     key = "finite_mu" if finite_mu else "infinite_mu"
-    cycles = max(OPS_PER_CELL[key] / FP_PER_CYCLE, STORES_PER_CELL[key] / STORES_PER_CYCLE)
+    cycles = max(OPS_PER_CELL[key] / FP_PER_CYCLE,
+                 STORES_PER_CELL[key] / STORES_PER_CYCLE) / SIMD_DOUBLES
     return core_hz() / cycles
 
 
@@ -325,9 +329,9 @@ def report(res) -> str:
           f"Machine limit estimate: the core clock /proc/cpuinfo reports ({core_hz() / 1e9:.2f} "
           "GHz; a boost clock would raise the limit and lower every fraction below) over the "
           "cycles of the minimal update of one cell inside the contact, the larger of its "
-          f"floating-point operations / {FP_PER_CYCLE} per cycle (scalar: two add and two mul "
-          f"pipes) and its stores / {STORES_PER_CYCLE} per cycle (latency of the running sums "
-          "ignored): "
+          f"floating-point operations / {FP_PER_CYCLE} per cycle (two add and two mul pipes) "
+          f"and its stores / {STORES_PER_CYCLE} per cycle, each on vectors of {SIMD_DOUBLES} "
+          "doubles (the inner-cell loops are vectorised; latency of the sums ignored): "
           f"{OPS_PER_CELL['finite_mu']} operations and {STORES_PER_CELL['finite_mu']} stores "
           f"with friction = {_limit(True) / 1e6:.0f} M/s, {OPS_PER_CELL['infinite_mu']} "
           f"operations and {STORES_PER_CELL['infinite_mu']} stores without = "
