@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import ast
 import os
+import re
 from pathlib import Path
 
 import yaml
@@ -83,12 +84,19 @@ def _literal(node):
                      "{...} and torch classes such as nn.ReLU)")
 
 
+_TORCH_NAME = re.compile(r"^((torch|th)\.)?(nn|optim)\.\w+$")
+
+
 def parse_kwargs(text) -> dict | None:
     """RL Zoo writes policy_kwargs / normalize as Python in strings: "dict(net_arch=[64],
     activation_fn=nn.ReLU)".  Parsed safely (``_literal``: literals, dict(...), nn.X; never
-    eval); a dict is returned as is, None as {}, True as {} and False as None (normalize)."""
-    if text is None or isinstance(text, dict):
-        return dict(text or {})
+    eval); a YAML mapping is taken with its torch class names (``activation_fn: nn.ReLU``)
+    resolved the same way, None as {}, True as {} and False as None (normalize)."""
+    if text is None:
+        return {}
+    if isinstance(text, dict):
+        return {k: _torch_attr(v.split(".")) if isinstance(v, str) and _TORCH_NAME.match(v)
+                else v for k, v in text.items()}
     if isinstance(text, bool):
         return {} if text else None
     if not isinstance(text, str):

@@ -112,7 +112,9 @@ def plot(data: dict, path: str | os.PathLike, title: str = "") -> Path:
 def controller_label(name: str) -> str:
     """A controller's part of output file names: its name, or for a model .zip its run
     folder and file stem (``runs/default/ppo_seed0/model.zip`` -> ``ppo_seed0-model``), so
-    that the models of two runs never write the same files."""
+    that the models of two runs of one scene folder never write the same files (runs of the
+    same name under two scene keys whose scenes share a ``name``, e.g. ``runs/default/`` and
+    ``runs/default-<digest8>/``, do: give them different ``--out`` folders)."""
     p = Path(name)
     if p.suffix != ".zip":
         return name

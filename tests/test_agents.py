@@ -694,6 +694,22 @@ def test_rl_zoo_strings_and_sb3_keywords_reach_the_model(tmp_path):
     assert model.policy.activation_fn is torch.nn.ReLU and model.policy.net_arch == [16]
 
 
+def test_policy_kwargs_as_a_yaml_mapping_resolves_torch_names():
+    """policy_kwargs written as a YAML mapping (not a string) passed 'nn.ReLU' on as a string,
+    and SB3 failed later with an obscure traceback: the names resolve as in the string form,
+    and an unknown one is refused naming the key."""
+    import torch
+
+    from agents.common import check_hyperparams
+    hp = check_hyperparams("sac", {"n_timesteps": 10, "policy_kwargs": {
+        "net_arch": [64], "activation_fn": "nn.ReLU", "optimizer_class": "th.optim.AdamW"}})
+    kw = hp["kwargs"]["policy_kwargs"]
+    assert kw["activation_fn"] is torch.nn.ReLU and kw["optimizer_class"] is torch.optim.AdamW, kw
+    with pytest.raises(ValueError, match="policy_kwargs.*nn.NoSuchLayer"):
+        check_hyperparams("sac", {"n_timesteps": 10,
+                                  "policy_kwargs": {"activation_fn": "nn.NoSuchLayer"}})
+
+
 @pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
 def test_a_loose_model_zip_is_loaded_with_its_own_algorithm(algo, tmp_path, capsys):
     """A model .zip without its run's config.yml was loaded as PPO (a loose SAC zip gave a
