@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .validation import as_real_array
+
 _TOL = 1e-12  # rounding slack when a target ratio sits on the edge of its reachable range
 W_MAX = 1e15  # largest rolling amplitude w = W/a1 taken (far beyond any drive; bounded so that
 # the impulse coefficients ~ w stay finite)
@@ -21,14 +23,7 @@ def _arr(name, x, lo=-np.inf, hi=np.inf, lo_open=False, hi_open=False):
     """``x`` as a float64 array, checked to be finite and in the interval [lo, hi]
     (ends open where asked); strings, booleans, complex numbers and other non-real input are
     a ValueError naming the parameter."""
-    try:
-        raw = np.asarray(x)
-    except (TypeError, ValueError):  # ragged nested sequences
-        raise ValueError(f"{name} must be a real number or array of them, got {x!r}") from None
-    if raw.dtype.kind not in "fiu":
-        raise ValueError(f"{name} must be a real number or array of them, got {x!r} (dtype "
-                         f"{raw.dtype})")
-    a = raw.astype(np.float64)
+    a = as_real_array(name, x)
     bad = ~np.isfinite(a) | (a < lo) | (a > hi)
     if lo_open:
         bad |= a == lo

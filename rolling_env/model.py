@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _kernel as K
-from .analytic import hertz_indentation
-from .validation import check_range
+from .analytic import hertz_force, hertz_indentation
+from .validation import as_real_array, check_range
 
 _INF = math.inf
 
@@ -299,8 +299,7 @@ class Drive:
         try:
             self._check_flags()
         except ValueError as e:  # no force equilibrium: say with which numbers
-            N_lo = float(4.0 / 3.0 * self.params.E_star * math.sqrt(self.params.R)
-                         * dd.min() ** 1.5) if k else 0.0
+            N_lo = float(hertz_force(dd.min(), self.params.R, self.params.E_star)) if k else 0.0
             raise ValueError(f"{e} (F_ext = {self.params.F_ext:g} N, mu = {self.params.mu:g}, "
                              f"least normal force of this run N = {N_lo:.6g} N)") from None
         res = self._to_si(out[:done])
@@ -450,14 +449,7 @@ def _check_stroke(stroke) -> tuple[float, float]:
 
 
 def _as_ticks(name, x, k=None):
-    try:
-        raw = np.asarray(x)
-    except (TypeError, ValueError):  # ragged nested sequences
-        raise ValueError(f"{name} must be a number or a 1-D array of numbers, got {x!r}") from None
-    if raw.dtype.kind not in "fiu":  # strings, booleans, complex, objects
-        raise ValueError(f"{name} must be a number or a 1-D array of real numbers, got "
-                         f"{x!r} (dtype {raw.dtype})")
-    a = np.atleast_1d(raw.astype(np.float64))
+    a = np.atleast_1d(as_real_array(name, x))
     if a.ndim != 1:
         raise ValueError(f"{name} must be a scalar or 1-D array of per-tick values")
     if k is not None:

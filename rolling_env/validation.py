@@ -36,6 +36,20 @@ def check_range(name: str, value, lo: float, hi: float, *, lo_open: bool = False
     return x
 
 
+def as_real_array(name: str, x) -> np.ndarray:
+    """``x`` as a float64 array, or ValueError naming ``name`` for strings, booleans, complex
+    numbers, objects and ragged nested sequences (which numpy would convert or reject with a
+    message that names no parameter)."""
+    try:
+        raw = np.asarray(x)
+    except (TypeError, ValueError):  # ragged nested sequences
+        raise ValueError(f"{name} must be a real number or array of them, got {x!r}") from None
+    if raw.dtype.kind not in "fiu":
+        raise ValueError(f"{name} must be a real number or array of them, got {x!r} (dtype "
+                         f"{raw.dtype})")
+    return raw.astype(np.float64)
+
+
 def _fmt(v: float) -> str:
     if math.isinf(v):
         return "inf" if v > 0 else "-inf"

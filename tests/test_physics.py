@@ -551,9 +551,9 @@ def _run0(drv, **kw):
 
 
 @pytest.mark.parametrize("call, name", [
-    (lambda: _run0(_drive(), omega_R="x"), "omega_R must be a number"),
-    (lambda: _run0(_drive(), N=[0.1, "a"]), "N must be a number"),
-    (lambda: _run0(_drive(), v=[True]), "v must be a number"),
+    (lambda: _run0(_drive(), omega_R="x"), "omega_R must be a real number"),
+    (lambda: _run0(_drive(), N=[0.1, "a"]), "N must be a real number"),
+    (lambda: _run0(_drive(), v=[True]), "v must be a real number"),
     (lambda: _run0(_drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, m=1.0)), vstar=5.0),
      "vstar is only for a prescribed runner"),
     (lambda: DriveParams(True, GEO.E_star, GEO.G_star), "R must be a number, got the boolean"),
