@@ -208,9 +208,6 @@ def check_run_scene(run: Path, scene, by_key: bool = True) -> None:
                          "comparable")
 
 
-_run_overrides = check_run_scene  # the earlier name
-
-
 def scene_runs(scene: str, runs: Path) -> list[Path]:
     """The run folders of a scene: ``<runs>/<scene key>/*/`` (the training script's layout;
     the key of a scene file is its stem)."""
