@@ -17,8 +17,11 @@ from . import _kernel as K
 # scene vector
 S_N_MIN, S_N_MAX, S_UMAX, S_CREEP, S_STROKE_R, S_STROKE_T, S_R, S_E = range(8)
 S_DT, S_L0, S_T0, S_F0, S_W0, S_TMAX, S_VREF, S_TREF, S_WREF = range(8, 17)
-S_WTRACK, S_WWEAR, S_PERIOD, S_EPISODE, S_NSUB = range(17, 22)
+S_WTRACK, S_WWEAR, S_TPP, S_EPISODE, S_NSUB = range(17, 22)
 N_SV = 22
+# followed by the observation clock: sin and cos of 2 pi j / ticks_per_period at
+# sv[N_SV + 2 j] and sv[N_SV + 2 j + 1], j = 0 .. ticks_per_period - 1 (a table: the clock
+# repeats every period, and two transcendental calls per tick were 3% of the default step)
 
 # per-env extras written besides the observation: reward terms and info values
 X_REWARD, X_TRACK, X_WEAR, X_SAT, X_U, X_V, X_N, X_T, X_SLIP, X_STICK, X_XS, X_VS = range(12)
@@ -27,7 +30,7 @@ N_OBS = 13
 OBS_BOUND = 10.0
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **K.JIT)
 def _travel(pos, step, limit):
     new = pos + step
     if abs(new) <= limit or step == 0.0:
@@ -38,12 +41,12 @@ def _travel(pos, step, limit):
     return 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **K.JIT)
 def _clip(x):
     return min(max(x, -OBS_BOUND), OBS_BOUND)
 
 
-@njit(cache=True)
+@njit(**K.JIT)
 def _env_tick(e, act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass, load,
               ledger):
     a0 = min(max(act[e, 0], -1.0), 1.0)
@@ -60,7 +63,8 @@ def _env_tick(e, act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu,
             _travel(ste[K.ST_XSPH] * L0, v * dt, sv[S_STROKE_T]))
     u *= f
     v *= f
-    d = (3.0 * N / (4.0 * sv[S_E] * math.sqrt(sv[S_R]))) ** (2.0 / 3.0)
+    cb = np.cbrt(3.0 * N / (4.0 * sv[S_E] * math.sqrt(sv[S_R])))  # Hertz: d = cb^2
+    d = cb * cb
     ts = t0 / L0
     n_sub = int(sv[S_NSUB])
     K._tick(U[e], A[e], B[e], L[e], ste, p[e], d / L0, u * ts, v * ts, 0.0, mu, mass, load,
@@ -74,7 +78,7 @@ def _env_tick(e, act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu,
     slip = oe[K.OUT_SLIP] * sv[S_W0]
     err = target[e] - xs
     k = steps[e]
-    ph = 2.0 * math.pi * (k * dt) / sv[S_PERIOD]
+    j = N_SV + 2 * (k % int(sv[S_TPP]))
     ob = obs[e]
     ob[0] = _clip(err / sv[S_TMAX])
     ob[1] = _clip(vs / sv[S_VREF])
@@ -83,8 +87,8 @@ def _env_tick(e, act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu,
     ob[4] = _clip(Nn / sv[S_N_MAX])
     ob[5] = _clip(T / sv[S_TREF])
     ob[6] = oe[K.OUT_STICK]
-    ob[7] = math.sin(ph)
-    ob[8] = math.cos(ph)
+    ob[7] = sv[j]
+    ob[8] = sv[j + 1]
     ob[9] = _clip(k / sv[S_EPISODE])
     ob[10] = a0
     ob[11] = a1
@@ -106,7 +110,7 @@ def _env_tick(e, act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu,
     x[X_VS] = vs
 
 
-@njit(cache=True)
+@njit(**K.JIT)
 def _actions_valid(act):
     """Every action finite and inside [-1, 1] (1e-6 tolerance; within it the tick clips)."""
     for e in range(act.shape[0]):
@@ -117,7 +121,7 @@ def _actions_valid(act):
     return True
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **K.JIT)
 def _env_bad(e, st, extra):
     """1 when env e raised a grid or non-finite flag or has a non-finite reward or velocity."""
     flag = int(st[e, K.ST_FLAG]) & (K.FLAG_GRID | K.FLAG_NONFINITE)
@@ -125,7 +129,7 @@ def _env_bad(e, st, extra):
     return 1 if (flag != 0 or not ok) else 0
 
 
-@njit(cache=True)
+@njit(**K.JIT)
 def env_step_serial(act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass, load,
                     ledger):
     """Step every env one tick.  Returns -1 (nothing stepped) when an action is out of range or
@@ -140,7 +144,7 @@ def env_step_serial(act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, 
     return bad
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")  # NRT on: prange needs it
 def env_step_parallel(act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass,
                       load, ledger):
     """``env_step_serial`` with the envs spread over threads (prange)."""
@@ -154,7 +158,7 @@ def env_step_parallel(act, sv, target, steps, U, A, B, L, st, p, out, obs, extra
     return bad
 
 
-@njit(cache=True)
+@njit(**K.JIT)
 def reset_obs(e, sv, target, obs):
     """Observation right after a reset (runner at rest, no contact, step 0)."""
     ob = obs[e]
@@ -172,14 +176,18 @@ def scene_vector(scene, a_max: float, drive) -> np.ndarray:
     T_ref = min(sc.mu * sc.N_max, T_stuck)
     wear_ref = (sc.mu * sc.N_max * sc.creep_max * sc.omega_R_max * sc.dt
                 if math.isfinite(sc.mu) else 1.0)
-    sv = np.zeros(N_SV)
+    tpp = sc.ticks_per_period
+    sv = np.zeros(N_SV + 2 * tpp)
+    phase = 2.0 * np.pi * np.arange(tpp) / tpp
+    sv[N_SV::2] = np.sin(phase)
+    sv[N_SV + 1::2] = np.cos(phase)
     sv[[S_N_MIN, S_N_MAX, S_UMAX, S_CREEP, S_STROKE_R, S_STROKE_T, S_R, S_E]] = (
         sc.N_min, sc.N_max, sc.omega_R_max, sc.creep_max, sc.stroke_roll, sc.stroke_translate,
         sc.R, sc.E_star)
     sv[[S_DT, S_L0, S_T0, S_F0, S_W0, S_TMAX, S_VREF, S_TREF, S_WREF]] = (
         sc.dt, drive.L0, drive.t0, drive.F0, drive.W0, sc.target_max, v_ref, T_ref, wear_ref)
-    sv[[S_WTRACK, S_WWEAR, S_PERIOD, S_EPISODE, S_NSUB]] = (
-        sc.w_track, sc.w_wear, sc.period, sc.episode_steps, sc.sub_steps)
+    sv[[S_WTRACK, S_WWEAR, S_TPP, S_EPISODE, S_NSUB]] = (
+        sc.w_track, sc.w_wear, tpp, sc.episode_steps, sc.sub_steps)
     return sv
 
 

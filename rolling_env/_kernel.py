@@ -28,7 +28,22 @@ force G* a_ref^2, so ``G* = 1`` here and ``E_over_G = E*/G*``).
 Feature specialisation: ``mu``, ``mass`` and ``load`` are ``None`` or float.  numba prunes the
 ``is None`` branches at compile time, so every scene gets a kernel that contains only what it
 needs (no slip checks with infinite friction, no dynamics for a prescribed runner, no load term
-without a load); each combination is compiled and cached once.
+without a load); each combination is compiled and cached once.  The energy ledger is a feature
+too (``ledger``): without it (the env) an edge cell's content is integrated in closed form
+(``_walk_content``) rather than walked piece by piece with the integrals the ledger needs.
+
+Compiler options (``JIT``, for every kernel here and in ``_envkernel``):
+
+* ``error_model="numpy"``: numba's default ("python") tests every float division for a zero
+  divisor so that it can raise ZeroDivisionError (2-3% of an env step).  The divisors here are
+  positive by construction; a 0/0 or x/0 would give NaN or inf, which the non-finite flag
+  reports.
+* ``_nrt=False`` (numba's own switch, private: its tests use it): no reference counting.  These
+  kernels allocate nothing; they only index arrays their caller owns for the whole call.  With
+  counting on, every call of a non-inlined kernel and every per-env view (``U[e]``) counted its
+  arrays up and down with atomic operations, about 45 per env step: 5% of the serial kernel,
+  and in the threaded batch both threads contended for the same counters (aggregate +12%
+  without them).  A kernel that allocated would fail to compile, not misbehave.
 """
 from __future__ import annotations
 
@@ -36,6 +51,8 @@ import math
 
 import numpy as np
 from numba import njit, uint64
+
+JIT = dict(cache=True, error_model="numpy", _nrt=False)  # see the module docstring
 
 # ----------------------------------------------------------------------------- state layout
 ST_C = 0        # patch centre c (spring frame)
@@ -76,7 +93,8 @@ N_OUT = 8
 # rows of the friction work array L (finite friction only; cells along the second axis)
 L_LIMIT = 0      # friction limit mu E*/G* integral of uN over the cell's part in contact
 L_E0, L_E1, L_E2 = 1, 2, 3  # released energy of an edge cell this sub-step: e0 + e1 s + e2 s^2
-N_LCOL = 4
+L_INV_ELL = 4    # 1 / overlap of an edge cell with the contact at the end of the sub-step (0: none)
+N_LCOL = 5
 
 # params vector
 P_R = 0
@@ -86,7 +104,7 @@ P_DX = 3
 N_PARAM = 4
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **JIT)
 def _cells(lo, hi):
     """range(lo, hi) over cell indices as unsigned integers: numba then indexes the cell
     arrays without its negative-index wrap-around (three integer operations per access: a
@@ -96,27 +114,27 @@ def _cells(lo, hi):
     return range(uint64(lo), uint64(max(hi, lo)))
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **JIT)
 def _edges(i0, i1, j0, j1):
     """The edge cells of i0..i1 (those outside the inner cells j0..j1) as ``for k in
     _edges(...)`` with cell ``_edge(k, j0, j1)``: the loop skips the inner block."""
     return _cells(i0, i1 + 1 - (j1 - j0 + 1))
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **JIT)
 def _edge(k, j0, j1):
     """Cell of edge position k (see ``_edges``): below the inner block, or past it."""
     return k if k < uint64(j0) else k + uint64(j1 - j0 + 1)
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **JIT)
 def _overlap(xL, xR, c, a):
     lo = max(xL, c - a)
     hi = min(xR, c + a)
     return hi - lo if hi > lo else 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **JIT)
 def _normal_content(xL, xR, c, a, d, inv3R):
     """Integral of uN = d - (x - c)^2 / R over the cell's part in contact (inv3R = 1/(3R))."""
     lo = max(xL, c - a)
@@ -127,13 +145,13 @@ def _normal_content(xL, xR, c, a, d, inv3R):
     return val if val > 0.0 else 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **JIT)
 def _inner_content(zl, zh, d, inv3R):
     """Integral of d - z^2 / R over [zl, zh] (both inside the contact)."""
     return (zh - zl) * (d - (zl * zl + zl * zh + zh * zh) * inv3R)
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **JIT)
 def _contact_range(c, a, x_lo, dx, n):
     """First and last cell touching the contact [c - a, c + a], clamped to the row (i0 in
     [0, n], i1 in [-1, n - 1]: an empty range for a contact beyond either end)."""
@@ -142,7 +160,7 @@ def _contact_range(c, a, x_lo, dx, n):
     return i0, i1
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **JIT)
 def _index(q, lo, hi):
     """The integral float q (np.floor / np.ceil: numba's math.floor already converts to int)
     as an int clamped to [lo, hi], clamped in floating point first: a q beyond the int64
@@ -155,14 +173,23 @@ def _index(q, lo, hi):
     return lo
 
 
-@njit(cache=True, inline="always")
-def _walk(U0, xL, xR, c0, a, u, dt):
+@njit(inline="always", **JIT)
+def _forward(xL, xR, c0, u):
+    """Cell bounds and patch centre in the frame where the patch moves towards +x."""
+    if u > 0.0:
+        return xL, xR, c0
+    return -xR, -xL, -c0
+
+
+@njit(inline="always", **JIT)
+def _walk(U0, xL, xR, c0, a, u, inv_au, dt):
     """Exact creep integration of one cell over a sub-step (uniform-cell model).
 
     Returns (A, B, IA, IB, e0, e1, e2) with
     U_end = A + B s, integral of U dt = IA + IB s, released elastic energy (G* = 1)
-    = e0 + e1 s + e2 s^2.  The patch centre moves from c0 to c0 + u dt.  Divides by |u|, not
-    by a precomputed 1/|u|, which would overflow for |u| below 1e-308.
+    = e0 + e1 s + e2 s^2.  The patch centre moves from c0 to c0 + u dt.  ``inv_au`` is 1/|u|
+    (``_inv_speed``: computed once per tick) or 0 where that would overflow (|u| below
+    1e-300), and then the walk divides by |u|.
     """
     A = U0
     B = 0.0
@@ -175,14 +202,7 @@ def _walk(U0, xL, xR, c0, a, u, dt):
         ell = _overlap(xL, xR, c0, a)
         return A, ell * dt, A * dt, 0.5 * ell * dt * dt, 0.0, 0.0, 0.0
     au = abs(u)
-    if u > 0.0:
-        pL = xL
-        pR = xR
-        p = c0
-    else:
-        pL = -xR
-        pR = -xL
-        p = -c0
+    pL, pR, p = _forward(xL, xR, c0, u)
     p_end = p + au * dt
     b0 = pL - a
     b1 = min(pR - a, pL + a)
@@ -198,14 +218,14 @@ def _walk(U0, xL, xR, c0, a, u, dt):
     while p < p_end:
         if p < b1:
             q = min(b1, p_end)
-            dtp = (q - p) / au
+            dtp = (q - p) * inv_au if inv_au > 0.0 else (q - p) / au
             la = p + a - pL
             IA += A * dtp
             IB += B * dtp + 0.5 * la * dtp * dtp + au * dtp * dtp * dtp / 6.0
             B += dtp * (la + 0.5 * au * dtp)
         elif p < b2:
             q = min(b2, p_end)
-            dtp = (q - p) / au
+            dtp = (q - p) * inv_au if inv_au > 0.0 else (q - p) / au
             if wide:
                 ell = pR - pL
                 IA += A * dtp
@@ -229,12 +249,13 @@ def _walk(U0, xL, xR, c0, a, u, dt):
                 B = B * (1.0 - em1) + g * em1
         elif p < b3:
             q = min(b3, p_end)
-            dtp = (q - p) / au
+            dtp = (q - p) * inv_au if inv_au > 0.0 else (q - p) / au
             la = pR + a - p
             lb = pR + a - q
             if la > 0.0:
-                mA = A / la
-                mB = B / la
+                r = 1.0 / la
+                mA = A * r
+                mB = B * r
                 J0 = la * dtp - 0.5 * au * dtp * dtp
                 J1 = 0.5 * la * dtp * dtp - au * dtp * dtp * dtp / 3.0
                 IA += mA * J0
@@ -256,7 +277,57 @@ def _walk(U0, xL, xR, c0, a, u, dt):
     return A, B, IA, IB, e0, e1, e2
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **JIT)
+def _walk_content(U0, xL, xR, c0, a, u, inv_au, dt):
+    """(A, B) of ``_walk`` (U_end = A + B s) without the integrals the ledger needs, in
+    closed form instead of a walk over the pieces: with the contact wider than the cell the
+    content grows by s times the integral of the overlap until the trailing edge enters the
+    cell, and from there its mean deflection grows by s (one division and no loop).  A
+    contact narrower than the cell takes ``_walk``.  Agrees with ``_walk`` to round-off
+    (tests/test_kernel_paths.py)."""
+    if u == 0.0:
+        return U0, _overlap(xL, xR, c0, a) * dt
+    au = abs(u)
+    pL, pR, p = _forward(xL, xR, c0, u)
+    ell = pR - pL
+    if ell > 2.0 * a:
+        A, B, _ia, _ib, _e0, _e1, _e2 = _walk(U0, xL, xR, c0, a, u, inv_au, dt)
+        return A, B
+    p_end = p + au * dt
+    b0 = pL - a
+    b1 = pR - a
+    b2 = pL + a
+    b3 = pR + a
+    if p_end <= b0:
+        return U0, 0.0
+    if p >= b3:
+        return 0.0, 0.0
+    p = max(p, b0)
+    pm = min(p_end, b2)  # end of the growing part (entry, then full)
+    e_hi = min(pm, b1)
+    B = max(e_hi - p, 0.0) * (0.5 * (e_hi + p) - b0) + ell * max(pm - max(p, b1), 0.0)
+    B = B * inv_au if inv_au > 0.0 else B / au
+    A = U0
+    if p_end > b2:  # the trailing edge crossed into the cell: d(U/l)/dt = s from pe on
+        pe = max(p, b2)
+        la = b3 - pe
+        lb = max(b3 - p_end, 0.0)
+        dte = min(p_end, b3) - pe
+        dte = dte * inv_au if inv_au > 0.0 else dte / au
+        r = lb / la
+        A = A * r
+        B = B * r + dte * lb
+    return A, B
+
+
+@njit(inline="always", **JIT)
+def _inv_speed(u):
+    """1/|u| for ``_walk``, or 0 where it would overflow (|u| <= 1e-300)."""
+    au = abs(u)
+    return 1.0 / au if au > 1e-300 else 0.0
+
+
+@njit(inline="always", **JIT)
 def _shrink_cell(U, i, xL, dx, c, a_old, a_new):
     """Release the part of cell i cut off when the contact shrinks from a_old to a_new (uniform
     content).  Returns (released elastic energy, change of content, new overlap)."""
@@ -270,7 +341,7 @@ def _shrink_cell(U, i, xL, dx, c, a_old, a_new):
     return 0.0, 0.0, ln
 
 
-@njit(cache=True)
+@njit(**JIT)
 def _set_radius(U, st, p, a_new, d_new, mu):
     """Instantaneous change of the indentation to d_new (contact half-width a_new).
 
@@ -313,21 +384,19 @@ def _set_radius(U, st, p, a_new, d_new, mu):
     else:
         inv3R = 1.0 / (3.0 * p[P_R])
         muEG = mu * p[P_E_OVER_G]
-        lo_new = c - a_new
-        hi_new = c + a_new
-        for i in _cells(i0, i1 + 1):
+        # cells inside the new contact (and so the old) lose nothing: a branch-free loop
+        if a_new > 0.0:
+            j0, j1 = _inner_range(i0, i1, c - a_new, c + a_new, x_lo, dx)
+        else:
+            j0, j1 = i1 + 1, i1
+        T, slip, snap = _snap_inner(U, j0, j1, x_lo, dx, c, muEG, d_new, inv3R, 1.0 / dx)
+        for k in _edges(i0, i1, j0, j1):
+            i = _edge(k, j0, j1)
             xL = x_lo + i * dx
             xR = xL + dx
-            if xL >= lo_new and xR <= hi_new:
-                # inside the new contact (and so the old): nothing cut off; the same
-                # overlap and limit as _shrink_cell and _normal_content give there
-                ln = xR - xL
-                val = _inner_content(xL - c, xR - c, d_new, inv3R)
-                Li = muEG * (val if val > 0.0 else 0.0)
-            else:
-                e_rel, _, ln = _shrink_cell(U, i, xL, dx, c, a_old, a_new)
-                rel += e_rel
-                Li = muEG * _normal_content(xL, xR, c, a_new, d_new, inv3R) if ln > 0.0 else 0.0
+            e_rel, _, ln = _shrink_cell(U, i, xL, dx, c, a_old, a_new)
+            rel += e_rel
+            Li = muEG * _normal_content(xL, xR, c, a_new, d_new, inv3R) if ln > 0.0 else 0.0
             if ln > 0.0:
                 Ui = U[i]
                 if abs(Ui) > Li:
@@ -343,14 +412,14 @@ def _set_radius(U, st, p, a_new, d_new, mu):
     return slip
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **JIT)
 def _clip_slope(Ut, Li, Bi):
     """Content clipped to the friction limit +-Li and its slope dU/ds (Bi stuck, 0 sliding)."""
     Uc = min(max(Ut, -Li), Li)  # branch-free; a NaN content still reaches the commit's check
     return Uc, (Bi if Uc == Ut else 0.0)
 
 
-@njit(cache=True)
+@njit(**JIT)
 def _solve_bracketed(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st):
     """Safeguarded Newton/bisection for the runner velocity with finite friction.
 
@@ -412,7 +481,7 @@ def _solve_bracketed(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st):
     return vv
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **JIT)
 def _g_eval(A, B, L, i0, i1, s0, vv, v0, mass, F, dt, st):
     """g(vv) of ``_solve_bracketed``: returns (g, T, scale, dT/ds), ``scale`` the size of the
     force terms whose round-off g carries: sum |U_i| and the slope times the round-off of
@@ -430,13 +499,13 @@ def _g_eval(A, B, L, i0, i1, s0, vv, v0, mass, F, dt, st):
     return mass * (vv - v0) - dt * (Tt + F), Tt, Ta + dT * (abs(s0) + abs(vv)), dT
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **JIT)
 def _converged(g, mass, vv, v0, dt, Ta, F):
     """g is piecewise linear: converged when it vanishes to round-off of its terms."""
     return abs(g) <= 1e-13 * (mass * (abs(vv) + abs(v0)) + dt * (Ta + abs(F))) + 1e-300
 
 
-@njit(cache=True, inline="always")
+@njit(inline="always", **JIT)
 def _inner_range(i0, i1, full_lo, full_hi, x_lo, dx):
     """Cells j0..j1 of i0..i1 that lie inside [full_lo, full_hi] (inside the contact during the
     whole sub-step), by the same floating-point test as the cell bounds; j1 = j0 - 1 when
@@ -456,7 +525,7 @@ def _inner_range(i0, i1, full_lo, full_hi, x_lo, dx):
 
 
 
-@njit(cache=True)
+@njit(**JIT)
 def _limit_sum(L, i0, i1, j0, j1):
     """Sum of the friction limits of cells i0..i1 (the inner cells j0..j1 first, then the
     edge cells, the order of the build pass)."""
@@ -468,16 +537,12 @@ def _limit_sum(L, i0, i1, j0, j1):
     return total
 
 
-@njit(cache=True)
+@njit(**JIT)
 def _stuck_length(U, L, i0, i1, j0, j1, x_lo, dx, c1, a):
     """Length of the contact whose cells stick (below their friction limit by more than
     1e-12 of it) after a commit: inner cells count dx, edge cells their overlap with the
     contact centred at c1.  Called for the last sub-step of a tick only."""
-    stuck = 0.0
-    for i in _cells(j0, j1 + 1):
-        Li = L[0, i]
-        if abs(U[i]) - Li < -1e-12 * Li:
-            stuck += dx
+    stuck = _stuck_inner(U, L, j0, j1) * dx
     for k in _edges(i0, i1, j0, j1):
         i = _edge(k, j0, j1)
         Li = L[0, i]
@@ -497,7 +562,7 @@ def _stuck_length(U, L, i0, i1, j0, j1, x_lo, dx, c1, a):
 _FM_INNER = {"reassoc", "nsz"}
 
 
-@njit(cache=True, fastmath=_FM_INNER)
+@njit(fastmath=_FM_INNER, **JIT)
 def _build_inner(U, A, L, j0, j1, x_lo, dx, c1, muEG, d, inv3R, dxdt, sv0, mu, mass):
     """Build pass over the inner cells j0..j1 (A = U; friction limits; runner equation at
     v0).  Returns (SU, Tt0, dT0)."""
@@ -521,7 +586,7 @@ def _build_inner(U, A, L, j0, j1, x_lo, dx, c1, muEG, d, inv3R, dxdt, sv0, mu, m
     return SU, Tt0, dT0
 
 
-@njit(cache=True, fastmath=_FM_INNER)
+@njit(fastmath=_FM_INNER, **JIT)
 def _commit_inner(U, A, L, j0, j1, dxdt, s, inv_dx, mu, mass):
     """Commit of the inner cells j0..j1.  Returns (T1, Ta, slip, clipped)."""
     T1 = 0.0
@@ -543,19 +608,52 @@ def _commit_inner(U, A, L, j0, j1, dxdt, s, inv_dx, mu, mass):
     return T1, Ta, slip, clipped
 
 
-@njit(cache=True)
+@njit(fastmath=_FM_INNER, **JIT)
+def _stuck_inner(U, L, j0, j1):
+    """Number of the inner cells j0..j1 that stick (see ``_stuck_length``), as a float."""
+    n_stuck = 0.0
+    for i in _cells(j0, j1 + 1):
+        Li = L[0, i]
+        n_stuck += 1.0 if abs(U[i]) - Li < -1e-12 * Li else 0.0
+    return n_stuck
+
+
+@njit(fastmath=_FM_INNER, **JIT)
+def _snap_inner(U, j0, j1, x_lo, dx, c, muEG, d_new, inv3R, inv_dx):
+    """Load drop over the inner cells j0..j1 (inside the new contact: nothing cut off, overlap
+    dx): contents above the new friction limit snap to it.  Returns (sum of the contents,
+    Coulomb work, elastic energy lost beyond it)."""
+    T = 0.0
+    slip = 0.0
+    snap = 0.0
+    for i in _cells(j0, j1 + 1):
+        zl = (x_lo + i * dx) - c
+        val = _inner_content(zl, zl + dx, d_new, inv3R)
+        Li = muEG * (val if val > 0.0 else 0.0)
+        Ui = U[i]
+        ex = abs(Ui) - Li
+        over = ex > 0.0
+        slip += Li * ex * inv_dx if over else 0.0
+        snap += 0.5 * ex * ex * inv_dx if over else 0.0
+        Ui = Li if Ui > Li else (-Li if Ui < -Li else Ui)
+        U[i] = Ui
+        T += Ui
+    return T, slip, snap
+
+
+@njit(**JIT)
 def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
     """Advance one control tick of n_sub sub-steps with piecewise-constant inputs.
 
     d: indentation, u: omega R (signed), v: sphere translation rate (signed),
     vs_presc: runner velocity when ``mass is None`` (prescribed runner), else ignored.
     mu / mass / load: float or None (infinite friction / prescribed runner / no load).
-    L: work array of shape (N_LCOL, n) with finite friction (friction limit and the
-    released-energy coefficients of edge cells), unused otherwise.
+    L: work array of shape (N_LCOL, n) with finite friction (friction limit, the
+    released-energy coefficients and 1 / overlap of edge cells), unused otherwise.
     ledger: True keeps the impulse and the energy ledger (``ST_IMP``, ``ST_REL``,
     ``ST_DRIVE``, ``ST_RUNNER``, ``ST_EXT``, ``OUT_IMP``); None leaves them out (the env needs
     neither: its observation, reward and info use T, v*, x*, the slip work and the stuck
-    fraction, which are the same either way).
+    fraction, which are the same either way, to round-off: tests/test_kernel_paths.py).
 
     Passes over the cells per sub-step: with infinite friction one build pass (A, B) and the
     commit; with finite friction and a free runner the build pass also evaluates the runner
@@ -563,8 +661,9 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
     verifies it (a kink crossed sends the sub-step to ``_solve_bracketed`` and commits again).
     Cells inside the contact for the whole sub-step (A = U, B = dx dt) take a branch-free
     loop (``_build_inner``, ``_commit_inner``, whose sums may be reordered so that LLVM
-    vectorises them); only the few edge cells are walked.  B of those inner cells is written only before
-    a call of ``_solve_bracketed`` (its only reader); elsewhere it holds stale values.
+    vectorises them); only the few edge cells are integrated one by one (``_walk`` with the
+    ledger, ``_walk_content`` without).  B of those inner cells is written only before a call
+    of ``_solve_bracketed`` (its only reader); elsewhere it holds stale values.
     """
     R = p[P_R]
     EG = p[P_E_OVER_G]
@@ -578,6 +677,7 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
     if mu is not None:
         muEG = mu * EG
     a = math.sqrt(R * d) if d > 0.0 else 0.0
+    inv_au = _inv_speed(u)
     slip_tick = _set_radius(U, st, p, a, d, mu)
     s0 = u - v
     F = 0.0
@@ -637,24 +737,25 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
             if ledger is not None:
                 SIA += SU * dt
                 SIB += n_in * 0.5 * dxdt * dt
-        # ------------------------------------------------ build: edge cells (walked)
+        # ------------------------------------------------ build: edge cells (integrated one by one)
         for k in _edges(i0, i1, j0, j1):
             i = _edge(k, j0, j1)
             xL = x_lo + i * dx
             xR = xL + dx
-            if a > 0.0:
-                Ai, Bi, IA, IB, e0, e1, e2 = _walk(U[i], xL, xR, c0, a, u, dt)
-                if ledger is not None:
-                    SIA += IA
-                    SIB += IB
-                    if mu is None:
-                        E0 += e0
-                        E1 += e1
-                        E2 += e2
-                    else:
-                        L[1, i] = e0
-                        L[2, i] = e1
-                        L[3, i] = e2
+            if a > 0.0 and ledger is None:
+                Ai, Bi = _walk_content(U[i], xL, xR, c0, a, u, inv_au, dt)
+            elif a > 0.0:
+                Ai, Bi, IA, IB, e0, e1, e2 = _walk(U[i], xL, xR, c0, a, u, inv_au, dt)
+                SIA += IA
+                SIB += IB
+                if mu is None:
+                    E0 += e0
+                    E1 += e1
+                    E2 += e2
+                else:
+                    L[L_E0, i] = e0
+                    L[L_E1, i] = e1
+                    L[L_E2, i] = e2
             else:
                 Ai = 0.0
                 Bi = 0.0
@@ -663,7 +764,17 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
             SA += Ai
             SB += Bi
             if mu is not None:
-                Li = muEG * _normal_content(xL, xR, c1, a, d, inv3R) if a > 0.0 else 0.0
+                # friction limit and 1 / overlap at the end of the sub-step (the commit's
+                # slip work divides by the overlap)
+                lo = max(xL, c1 - a)
+                hi = min(xR, c1 + a)
+                if hi > lo:
+                    val = _inner_content(lo - c1, hi - c1, d, inv3R)
+                    Li = muEG * (val if val > 0.0 else 0.0)
+                    L[L_INV_ELL, i] = 1.0 / (hi - lo)
+                else:
+                    Li = 0.0
+                    L[L_INV_ELL, i] = 0.0
                 L[0, i] = Li
                 if mass is not None:
                     Ut, dU = _clip_slope(Ai + Bi * sv0, Li, Bi)
@@ -721,7 +832,7 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
                         # the deflection an edge cell released this sub-step, from the creep
                         # integral, can be no larger than the friction limit allows (the
                         # released material is at the limit once the cell slides)
-                        ei = L[1, i] + s * (L[2, i] + s * L[3, i])
+                        ei = L[L_E0, i] + s * (L[L_E1, i] + s * L[L_E2, i])
                         if abs(Ut) > Li and Ut != 0.0:
                             ei *= (Li / Ut) * (Li / Ut)
                         elif Li == 0.0 and ei > 0.0:
@@ -738,15 +849,14 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
                                 Ln = muEG * _normal_content(xL, xL + dx, cn, a, d, inv3R)
                                 ei = min(ei, 0.5 * Ln * Ln / ln)
                         rel += ei
+                    # a cell beyond its limit slides to it, doing the limit times the slip
+                    # of its mean deflection (branch-free, as in _commit_inner)
                     ex = abs(Ut) - Li
-                    if ex > 0.0:
-                        # slip work: the limit times the slip of the cell's mean deflection
-                        xL = x_lo + i * dx
-                        ell = _overlap(xL, xL + dx, c1, a)
-                        if ell > 0.0:
-                            slip += Li * ex / ell
-                        Ut = Li if Ut > 0.0 else -Li
-                        clipped = True
+                    over = ex > 0.0
+                    clipped |= over
+                    inv_ell = L[L_INV_ELL, i]
+                    slip += Li * ex * inv_ell if (over and inv_ell > 0.0) else 0.0
+                    Ut = Li if Ut > Li else (-Li if Ut < -Li else Ut)
                     if mass is not None:
                         Ta += abs(Ut)
                 U[i] = Ut
@@ -810,7 +920,7 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
         st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_NONFINITE
 
 
-@njit(cache=True)
+@njit(**JIT)
 def run_ticks(U, A, B, L, st, p, d, u, v, vs, mu, mass, load, n_sub, dt, out):
     """Run len(d) ticks; out has shape (len(d), N_OUT).  Stops at the first error flag."""
     for k in range(d.shape[0]):
@@ -820,7 +930,7 @@ def run_ticks(U, A, B, L, st, p, d, u, v, vs, mu, mass, load, n_sub, dt, out):
     return d.shape[0]
 
 
-@njit(cache=True)
+@njit(**JIT)
 def elastic_energy(U, st, p):
     """Tangential elastic energy 1/2 sum U_i^2 / l_i (G* = 1 units)."""
     c = st[ST_C]
@@ -840,7 +950,7 @@ def elastic_energy(U, st, p):
     return e
 
 
-@njit(cache=True)
+@njit(**JIT)
 def normal_force_sum(st, p, n):
     """Sum over the cells of E*/G* times the exact integral of uN (normal force, G* = 1 units):
     the discrete normal force that the friction limits use."""

@@ -1,0 +1,126 @@
+"""The kernel's two code paths for one physics: the env's (no energy ledger, closed-form edge
+cells, ``_kernel._walk_content``) and ``Drive.run``'s (ledger on, ``_kernel._walk``) must give
+the same trajectories to round-off; and the observation clock table of the env kernel."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from numba import njit
+
+import rolling_env
+from rolling_env import _envkernel as EK
+from rolling_env import _kernel as K
+from rolling_env.vector import BatchCore
+
+
+def _random_cells(rng, n):
+    """Cells of width dx at x_lo + i dx, contacts wider and narrower than a cell, centres
+    before, on and past the cell, speeds of both signs down to 1e-305 (1/|u| overflows)."""
+    dx = 10.0 ** rng.uniform(-2, 1, n)
+    xL = rng.uniform(-3, 3, n)
+    a = dx * 10.0 ** rng.uniform(-1.5, 1.5, n)
+    c0 = xL + rng.uniform(-2, 2, n) * (a + dx)
+    u = rng.choice([-1.0, 1.0], n) * 10.0 ** rng.uniform(-3, 1, n)
+    u[::17] = 0.0
+    u[5::23] = rng.choice([-1.0, 1.0]) * 1e-305
+    dt = 10.0 ** rng.uniform(-2, 0.5, n)
+    dt[5::23] = 1e303  # moves the 1e-305 speeds by about a cell
+    U0 = rng.normal(size=n) * dx
+    return dx, xL, a, c0, u, dt, U0
+
+
+def test_closed_form_edge_cell_matches_the_walk():
+    """(A, B) of ``_walk_content`` equal those of ``_walk`` to 1e-12 of the content scale,
+    over 20,000 random cells (entry, full, exit, passing through, narrow contacts,
+    both directions, u = 0 and |u| so small that 1/|u| overflows)."""
+    rng = np.random.default_rng(7)
+    dx, xL, a, c0, u, dt, U0 = _random_cells(rng, 20_000)
+    for k in range(dx.size):
+        inv = K._inv_speed(u[k])
+        args = (U0[k], xL[k], xL[k] + dx[k], c0[k], a[k], u[k], inv, dt[k])
+        A1, B1 = K._walk_content(*args)
+        A2, B2 = K._walk(*args)[:2]
+        scale_A = abs(U0[k]) + 1e-300
+        scale_B = dx[k] * dt[k]
+        err = max(abs(A1 - A2) / scale_A, abs(B1 - B2) / scale_B)
+        assert err <= 1e-12, (f"cell {k}: closed form ({A1!r}, {B1!r}) vs walk ({A2!r}, {B2!r}); "
+                              f"inputs {args}")
+
+
+@njit
+def _run(U, A, B, L, st, p, d, u, v, mu, mass, load, n_sub, dt, outs, ledger):
+    for k in range(d.shape[0]):
+        K._tick(U, A, B, L, st, p, d[k], u[k], v[k], 0.0, mu, mass, load, n_sub, dt, outs[k],
+                ledger)
+
+
+def _inputs(core, ticks, seed):
+    """Scaled (d, u, v) per tick as the env kernel makes them from random actions; the
+    rolling rate goes back and forth (pairs of ticks of opposite rates) so that the contact
+    stays on the spring row."""
+    sv = core.sv
+    act = np.random.default_rng(seed).uniform(-1, 1, (ticks, 3))
+    N = sv[EK.S_N_MIN] + 0.5 * (act[:, 0] + 1) * (sv[EK.S_N_MAX] - sv[EK.S_N_MIN])
+    L0, t0 = sv[EK.S_L0], sv[EK.S_T0]
+    d = (3 * N / (4 * sv[EK.S_E] * math.sqrt(sv[EK.S_R]))) ** (2 / 3) / L0
+    u = np.abs(act[:, 1]) * sv[EK.S_UMAX] * t0 / L0
+    u[1::2] = -u[0::2][: u[1::2].size]
+    v = u * (1 - act[:, 2] * sv[EK.S_CREEP])
+    n_sub = int(sv[EK.S_NSUB])
+    return d, u, v, n_sub, sv[EK.S_DT] / n_sub / t0
+
+
+@pytest.mark.parametrize("scene", rolling_env.list_scenes())
+def test_env_path_matches_the_ledger_path(scene):
+    """The env kernel leaves the energy ledger out and integrates the edge cells in closed
+    form; ``Drive.run`` keeps the ledger and walks them.  Over 300 random ticks of every
+    shipped scene (its own friction, mass and load) T, v*, x*, slip work and contact centre
+    agree to 1e-11 of each column's largest value, and the stuck fraction to one cell in a
+    hundred ticks (a cell exactly at its friction limit may read either way)."""
+    core = BatchCore(1, scene=scene)
+    d, u, v, n_sub, dt = _inputs(core, 300, seed=3)
+    mu, mass, load, _ = core.features
+    outs = {}
+    for ledger in (True, None):
+        U, A, B, L, st = (x[0].copy() for x in (core.U, core.A, core.B, core.L, core.st))
+        out = np.zeros((d.size, K.N_OUT))
+        _run(U, A, B, L, st, core.p[0], d, u, v, mu, mass, load, n_sub, dt, out, ledger)
+        assert st[K.ST_FLAG] == 0, f"{scene}: flags {st[K.ST_FLAG]} (contact left the row?)"
+        outs[ledger] = out
+    ref, env = outs[True], outs[None]
+    for col, name in [(K.OUT_T, "T"), (K.OUT_VS, "v*"), (K.OUT_XS, "x*"),
+                      (K.OUT_SLIP, "slip work"), (K.OUT_C, "c"), (K.OUT_N, "N")]:
+        scale = np.abs(ref[:, col]).max() + 1e-300
+        err = np.abs(env[:, col] - ref[:, col]).max() / scale
+        assert err <= 1e-11, f"{scene}: {name} differs by {err:.1e} of its largest value"
+    stick = np.abs(env[:, K.OUT_STICK] - ref[:, K.OUT_STICK])
+    assert stick.max() <= 0.2 and stick.mean() <= 1e-3, (
+        f"{scene}: stuck fraction differs by up to {stick.max():.3f}, mean {stick.mean():.1e}")
+
+
+@pytest.mark.parametrize("ticks_per_period", [2, 3, 7, 8, 1000])
+def test_observation_clock_is_the_excitation_phase(ticks_per_period):
+    """Observations 7 and 8 are sin and cos of 2 pi t / period at every step (read from a
+    table of one period), to float32 precision, over two and a half periods."""
+    env = rolling_env.make("default", ticks_per_period=ticks_per_period,
+                           episode_steps=5 * ticks_per_period // 2 + 3)
+    obs, _ = env.reset(seed=0)
+    steps = 5 * ticks_per_period // 2
+    zero = np.zeros(3, dtype=np.float32)
+    for k in range(1, steps + 1):
+        obs, *_ = env.step(zero)
+        ph = 2 * math.pi * k / ticks_per_period
+        assert abs(obs[7] - math.sin(ph)) <= 1e-6 and abs(obs[8] - math.cos(ph)) <= 1e-6, (
+            f"step {k}: clock ({obs[7]}, {obs[8]}), expected ({math.sin(ph)}, {math.cos(ph)})")
+
+
+def test_scene_vector_carries_one_period_of_the_clock():
+    """The clock table is one period long: its first entry is (0, 1), and it never needs an
+    index past its end (k mod ticks_per_period)."""
+    core = BatchCore(1, ticks_per_period=5)
+    sv = core.sv
+    assert sv.shape == (EK.N_SV + 10,), f"scene vector of shape {sv.shape}"
+    assert (sv[EK.N_SV], sv[EK.N_SV + 1]) == (0.0, 1.0)
+    assert int(sv[EK.S_TPP]) == 5
