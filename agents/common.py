@@ -361,7 +361,7 @@ def make_vec_env(scene, n_envs: int, seed: int, env_kwargs: dict | None = None):
     like SB3's make_vec_env."""
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from rolling_env.vector import RollingDriveVecEnv
+    from rolling_env.sb3_vec import RollingDriveVecEnv
 
     kw = dict(env_kwargs or {})
     kw.pop("scene", None)

@@ -140,7 +140,7 @@ def kernel_throughput(ticks=20_000, scenes=None):
 
 def asymptotic_cell_rate(finite_mu: bool, resolution=128, n_sub=32, ticks=40):
     """Cell updates/s of the kernel (``Drive.run``, energy ledger on) on a large contact rolling
-    at constant creep, where per-tick work and the walked edge cells no longer count: what the
+    at constant creep, where per-tick work and the few edge cells no longer count: what the
     per-cell arithmetic reaches, against the same machine limit."""
     from .experiments import Geometry
     from .model import Drive, DriveParams
@@ -194,7 +194,7 @@ def batched(n_envs=256, ticks=200, single_rate=None, sizes=(1, 4, 16, 64, 256)):
     import gymnasium as gym
 
     from . import _envkernel as EK
-    from .vector import RollingDriveVecEnv
+    from .sb3_vec import RollingDriveVecEnv
     from .vector import BatchCore
     sweep = []
     for n in sizes:
@@ -235,7 +235,7 @@ def sb3_training_env(sizes=(1, 8, 256), ticks=2000):
     from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
     import rolling_env
-    from .vector import RollingDriveVecEnv
+    from .sb3_vec import RollingDriveVecEnv
     rows = []
     for n in sizes:
         rates = {}
@@ -270,17 +270,33 @@ def naive_equal_accuracy():
 _STARTUP = ("import time; t = time.perf_counter(); import gymnasium as gym, rolling_env; "
             "e = gym.make('RollingDrive-v0'); e.reset(seed=0); e.step(e.action_space.sample()); "
             "print(time.perf_counter() - t)")
-_MEMORY = ("import resource, numpy as np, rolling_env, gymnasium as gym; "
-           "from rolling_env.vector import BatchCore; n = {n}; "
-           "base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; "
-           "x = gym.make('RollingDrive-v0') if n == 1 else BatchCore(n); "
-           "(x.reset(seed=0), x.step(x.action_space.sample())) if n == 1 else "
-           "(x.reset(), x.step(np.zeros((n, 3)))); "
-           "arrs = [x.unwrapped.drive.U, x.unwrapped.drive.A, x.unwrapped.drive.B, "
-           "x.unwrapped.drive.L, x.unwrapped.drive.st] if n == 1 else "
-           "[x.U, x.A, x.B, x.L, x.st, x.p, x.obs, x.out, x.extra]; "
-           "print(base, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, "
-           "sum(a.nbytes for a in arrs))")
+# peak RSS from /proc/self/status (VmHWM, kB): on Linux getrusage's ru_maxrss survives fork +
+# exec, so in a subprocess it reported the benchmark process's own peak (389 MiB with torch
+# loaded) until 2026-11-24; ru_maxrss (kB on Linux) only where there is no /proc
+_PEAK = """
+def peak():
+    try:
+        with open("/proc/self/status") as f:
+            return next(int(line.split()[1]) for line in f if line.startswith("VmHWM:"))
+    except (OSError, StopIteration):
+        import resource
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+"""
+_MEMORY = _PEAK + """
+import numpy as np, gymnasium as gym, rolling_env
+base = peak()
+n = {n}
+if n == 1:
+    x = gym.make("RollingDrive-v0"); x.reset(seed=0); x.step(x.action_space.sample())
+    d = x.unwrapped.drive
+    arrs = [d.U, d.A, d.B, d.L, d.st]
+else:
+    x = gym.make_vec("RollingDrive-v0", num_envs=n); x.reset(seed=0)
+    x.step(np.zeros((n, 3), dtype=np.float32))
+    c = x.core
+    arrs = [c.U, c.A, c.B, c.L, c.st, c.p, c.obs, c.out, c.extra]
+print(base, peak(), sum(a.nbytes for a in arrs))
+"""
 
 
 def startup_and_memory():
@@ -345,14 +361,14 @@ def report(res) -> str:
         L += ["", "The physics kernel through `Drive.run` (energy ledger on: a little more work "
               "than the env's) on a large contact (256 cells, 32 sub-steps per tick, rolling at "
               "constant creep), where the per-tick work and "
-              "the few walked edge cells no longer count: "
+              "the few edge cells no longer count: "
               f"{asy['finite_mu']['cell_updates_per_s'] / 1e6:.0f} M/s with friction "
               f"({asy['finite_mu']['fraction']:.2f} of the limit), "
               f"{asy['infinite_mu']['cell_updates_per_s'] / 1e6:.0f} M/s without "
               f"({asy['infinite_mu']['fraction']:.2f}).  At 16 cells per radius the scenes' contacts "
               "span at most 34 cells, so there the per-tick work (action mapping, load change, "
-              "observation) and the edge cells, walked exactly through their entry and exit, "
-              "take the rest."]
+              "observation) and the edge cells, integrated one by one exactly through their "
+              "entry and exit, take the rest."]
     L += ["", "## Scene specialisation (env steps/s, 64 envs, serial)", "",
           "Every feature on: friction (mu = 1e30 where the scene has none), the load term "
           "(F_ext = 0.0 where it has none) and the impulse/energy ledger, which the env never "
@@ -404,12 +420,16 @@ def report(res) -> str:
           f"- import + gym.make + first step, warm numba cache: {s['warm_seconds']:.2f} s "
           "(target < 3 s)",
           f"- the same with an empty numba cache (cold, compiles): {s['cold_seconds']:.1f} s",
-          f"- peak RSS of the process, one env: {s['memory'][1]['peak_mib']:.0f} MiB "
-          f"(state arrays {s['memory'][1]['state_mib']:.3f} MiB; the rest is Python, numpy, "
-          "numba/LLVM and Gymnasium)",
-          f"- peak RSS, batched env with 1024 envs: {s['memory'][1024]['peak_mib']:.0f} MiB "
-          f"(state arrays {s['memory'][1024]['state_mib']:.1f} MiB, "
-          f"{s['memory'][1024]['above_imports_mib']:.1f} MiB above the imports)"]
+          f"- peak RSS of the process, one env (`gym.make`, one step): "
+          f"{s['memory'][1]['peak_mib']:.0f} MiB, of which "
+          f"{s['memory'][1]['peak_mib'] - s['memory'][1]['above_imports_mib']:.0f} MiB after "
+          f"importing numpy, Gymnasium and rolling_env and "
+          f"{s['memory'][1]['above_imports_mib']:.0f} MiB for making and stepping the env "
+          f"(numba and LLVM, loaded with the first kernel; state arrays "
+          f"{s['memory'][1]['state_mib']:.3f} MiB)",
+          f"- peak RSS, batched env with 1024 envs (`gym.make_vec`, one step): "
+          f"{s['memory'][1024]['peak_mib']:.0f} MiB ({s['memory'][1024]['above_imports_mib']:.0f}"
+          f" MiB above the imports; state arrays {s['memory'][1024]['state_mib']:.1f} MiB)"]
     return "\n".join(L) + "\n"
 
 

@@ -1,8 +1,12 @@
-"""The benchmark's arithmetic (timings themselves stay out of the test suite)."""
+"""The benchmark's arithmetic and probes (timings themselves stay out of the test suite)."""
 import math
+import subprocess
+import sys
 
+import numpy as np
 import pytest
 
+from rolling_env import bench
 from rolling_env.bench import ratio_bound
 
 
@@ -31,3 +35,15 @@ def test_ratio_bound_no_python_layer_is_unreachable():
     """A single env that is all physics cannot gain from batching beyond the threads."""
     r = ratio_bound(single=400e3, serial=400e3, one_thread=400e3, threads=2, target=10.0)
     assert r["bound"] == pytest.approx(2.0) and math.isinf(r["speedup_needed"]), r
+
+
+def test_memory_probe_ignores_the_parents_peak():
+    """The peak-RSS probe the benchmark runs in a subprocess reports that process's own peak:
+    after this process has touched 400 MB, a child that imports numpy reports well under
+    200 MiB (getrusage's ru_maxrss, used before, carries the parent's peak across fork +
+    exec)."""
+    big = np.ones(50_000_000)
+    code = bench._PEAK + "import numpy\nprint(peak())"
+    kib = int(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             check=True).stdout)
+    assert big[-1] == 1.0 and kib < 200 * 1024, f"child reported a peak of {kib / 1024:.0f} MiB"
