@@ -38,12 +38,13 @@ Compiler options (``JIT``, for every kernel here and in ``_envkernel``):
   divisor so that it can raise ZeroDivisionError (2-3% of an env step).  The divisors here are
   positive by construction; a 0/0 or x/0 would give NaN or inf, which the non-finite flag
   reports.
-* ``_nrt=False`` (numba's own switch, private: its tests use it): no reference counting.  These
-  kernels allocate nothing; they only index arrays their caller owns for the whole call.  With
-  counting on, every call of a non-inlined kernel and every per-env view (``U[e]``) counted its
-  arrays up and down with atomic operations, about 45 per env step: 5% of the serial kernel,
-  and in the threaded batch both threads contended for the same counters (aggregate +12%
-  without them).  A kernel that allocated would fail to compile, not misbehave.
+* ``_nrt=False`` (numba's own switch, private: its tests use it; ``_jit_options``): no
+  reference counting.  These kernels allocate nothing; they only index arrays their caller
+  owns for the whole call.  With counting on, every call of a non-inlined kernel and every
+  per-env view (``U[e]``) counted its arrays up and down with atomic operations, about 45 per
+  env step: 5% of the serial kernel, and in the threaded batch both threads contended for the
+  same counters (aggregate +12% without them).  A kernel that allocated would fail to
+  compile, not misbehave.  ``env_step_parallel`` keeps counting (prange needs it).
 """
 from __future__ import annotations
 
@@ -52,7 +53,24 @@ import math
 import numpy as np
 from numba import njit, uint64
 
-JIT = dict(cache=True, error_model="numpy", _nrt=False)  # see the module docstring
+
+
+def _jit_options() -> dict:
+    """``cache``, ``error_model="numpy"`` and, where this numba has it, ``_nrt=False`` (see the
+    module docstring).  ``_nrt`` is private: should a numba release drop it, the kernels keep
+    reference counting (about 5% slower) rather than fail to compile (numba refuses unknown
+    options at the first call); tests/test_kernel_paths.py says so with the numba tested."""
+    opts = dict(cache=True, error_model="numpy")
+    try:
+        from numba.core.cpu import CPUTargetOptions
+        if hasattr(CPUTargetOptions, "_nrt"):
+            opts["_nrt"] = False
+    except Exception:  # numba's internals moved: keep the counting
+        pass
+    return opts
+
+
+JIT = _jit_options()
 
 # ----------------------------------------------------------------------------- state layout
 ST_C = 0        # patch centre c (spring frame)
@@ -314,7 +332,7 @@ def _walk_content(U0, xL, xR, c0, a, u, inv_au, dt):
         lb = max(b3 - p_end, 0.0)
         dte = min(p_end, b3) - pe
         dte = dte * inv_au if inv_au > 0.0 else dte / au
-        r = lb / la
+        r = lb / la if la > 0.0 else 0.0  # la = 0: cell below the coordinates' rounding step
         A = A * r
         B = B * r + dte * lb
     return A, B

@@ -35,6 +35,9 @@ from .scenes import load_scene
 
 PARALLEL_MIN_ENVS = 4
 
+__all__ = ["BatchCore", "RollingDriveVectorEnv", "RollingDriveVecEnv", "make_vector_env",
+           "PARALLEL_MIN_ENVS"]
+
 
 def _check_seed(seed, name: str) -> int:
     """A seed as a Python int: a non-negative integer (numpy integers too), not a bool."""

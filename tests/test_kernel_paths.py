@@ -1,9 +1,12 @@
 """The kernel's two code paths for one physics: the env's (no energy ledger, closed-form edge
 cells, ``_kernel._walk_content``) and ``Drive.run``'s (ledger on, ``_kernel._walk``) must give
-the same trajectories to round-off; and the observation clock table of the env kernel."""
+the same trajectories to round-off, and both the trajectories of the kernel before the
+2026-11-24 speed-ups (a recorded reference); the observation clock table of the env kernel."""
 from __future__ import annotations
 
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,13 +17,15 @@ from rolling_env import _envkernel as EK
 from rolling_env import _kernel as K
 from rolling_env.vector import BatchCore
 
+sys.path.insert(0, str(Path(__file__).parent))  # tests/make_golden.py
+
 
 def _random_cells(rng, n):
     """Cells of width dx at x_lo + i dx, contacts wider and narrower than a cell, centres
     before, on and past the cell, speeds of both signs down to 1e-305 (1/|u| overflows)."""
     dx = 10.0 ** rng.uniform(-2, 1, n)
     xL = rng.uniform(-3, 3, n)
-    a = dx * 10.0 ** rng.uniform(-1.5, 1.5, n)
+    a = dx * 10.0 ** rng.uniform(-0.5, 1.5, n)  # about 10% narrower than a cell
     c0 = xL + rng.uniform(-2, 2, n) * (a + dx)
     u = rng.choice([-1.0, 1.0], n) * 10.0 ** rng.uniform(-3, 1, n)
     u[::17] = 0.0
@@ -47,6 +52,56 @@ def test_closed_form_edge_cell_matches_the_walk():
         err = max(abs(A1 - A2) / scale_A, abs(B1 - B2) / scale_B)
         assert err <= 1e-12, (f"cell {k}: closed form ({A1!r}, {B1!r}) vs walk ({A2!r}, {B2!r}); "
                               f"inputs {args}")
+
+
+def _boundary_cells(rng, n):
+    """Cells and motions whose start and end land exactly on the piece boundaries of the walk
+    (contact edge at a cell edge, at a cell midpoint, contact exactly two cells wide...):
+    power-of-two coordinates and |u| = 1, so every sum is exact."""
+    cases = []
+    for _ in range(n):
+        dx = 2.0 ** rng.integers(-6, 3)
+        pL = rng.integers(-64, 64) * 2.0 ** -6
+        pR = pL + dx
+        a = [dx / 2, dx * 2.0 ** rng.integers(-3, 6), dx * rng.uniform(0.5, 8)][rng.integers(3)]
+        b = [pL - a, min(pR - a, pL + a), max(pR - a, pL + a), pR + a]
+        pts = b + [pL, pR, pL - 2 * a - dx, pR + 2 * a + dx, 0.5 * (b[0] + b[1]),
+                   0.5 * (b[2] + b[3]), 0.5 * (b[1] + b[2])]
+        p, pe = sorted((pts[rng.integers(len(pts))], pts[rng.integers(len(pts))]))
+        if pe == p:
+            pe = p + dx * rng.uniform(0, 3)
+        U0 = rng.normal() * dx
+        cases.append((U0, pL, pR, p, a, 1.0, pe - p))
+        cases.append((U0, -pR, -pL, -p, a, -1.0, pe - p))  # the same, moving to -x
+    return cases
+
+
+def test_closed_form_edge_cell_matches_the_walk_on_piece_boundaries():
+    """Starts and ends exactly on the entry / full / exit boundaries (4,000 cases, both
+    directions): the closed form and the walk agree to 1e-12 and are finite together."""
+    for U0, xL, xR, c0, a, u, dt in _boundary_cells(np.random.default_rng(11), 2000):
+        inv = K._inv_speed(u)
+        A1, B1 = K._walk_content(U0, xL, xR, c0, a, u, inv, dt)
+        A2, B2 = K._walk(U0, xL, xR, c0, a, u, inv, dt)[:2]
+        assert np.isfinite([A1, B1, A2, B2]).all(), (U0, xL, xR, c0, a, u, dt, A1, B1, A2, B2)
+        err = max(abs(A1 - A2) / (abs(U0) + 1e-300), abs(B1 - B2) / ((xR - xL) * dt))
+        assert err <= 1e-12, (f"closed form ({A1!r}, {B1!r}) vs walk ({A2!r}, {B2!r}) at "
+                              f"{(U0, xL, xR, c0, a, u, dt)}")
+
+
+def test_closed_form_edge_cell_below_the_rounding_step_stays_finite():
+    """A cell narrower than the rounding step of its coordinates (x + a gives the same float at
+    both cell edges) leaves the contact with nothing, as in the walk, not with 0/0 = NaN."""
+    args = (0.5, 0.0, 1.0, 2.0 ** 60 - 1024, 2.0 ** 60, 1.0, 1.0, 2048.0)
+    assert K._walk_content(*args) == (0.0, 0.0) == K._walk(*args)[:2]
+
+
+def test_kernels_compile_without_reference_counting():
+    """With the numba this project is tested against, the kernels are built without numba's
+    reference counting (``_nrt=False``: 5% of the serial kernel, +12% for the threaded
+    batch); a numba without the option keeps them working, but slower."""
+    assert K.JIT.get("_nrt") is False, f"kernel options {K.JIT}: reference counting is on"
+    assert K.JIT["error_model"] == "numpy"
 
 
 @njit
@@ -124,3 +179,28 @@ def test_scene_vector_carries_one_period_of_the_clock():
     assert sv.shape == (EK.N_SV + 10,), f"scene vector of shape {sv.shape}"
     assert (sv[EK.N_SV], sv[EK.N_SV + 1]) == (0.0, 1.0)
     assert int(sv[EK.S_TPP]) == 5
+
+
+GOLDEN = Path(__file__).parent / "data" / "golden_3ab498b.npz"
+
+
+@pytest.mark.parametrize("scene", rolling_env.list_scenes())
+def test_env_reproduces_the_kernel_before_the_speed_ups(scene):
+    """128 seeded random steps of every shipped scene against the trajectory recorded with
+    commit 3ab498b (tests/make_golden.py: the kernel before the 2026-11-24 speed-ups, whose
+    changes are all meant to be round-off): observations to 2e-6 (float32), rewards and every
+    info value to 1e-10 of their largest magnitude."""
+    import make_golden
+    ref = np.load(GOLDEN)
+    new = make_golden.record(scene)
+    keys = {k.split("/", 1)[1] for k in ref.files if k.startswith(scene + "/")}
+    assert keys == set(new), f"{scene}: recorded {sorted(keys)}, now {sorted(new)}"
+    for k in sorted(keys):
+        old, cur = ref[f"{scene}/{k}"], new[k]
+        assert old.shape == cur.shape, f"{scene}/{k}: shape {old.shape} -> {cur.shape}"
+        if k == "obs":
+            err = np.abs(cur - old).max()
+            assert err <= 2e-6, f"{scene}: observations differ by up to {err:.1e}"
+        else:
+            err = np.abs(cur - old).max() / (np.abs(old).max() + 1e-300)
+            assert err <= 1e-10, f"{scene}/{k}: differs by {err:.1e} of its largest value"
