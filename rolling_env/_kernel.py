@@ -200,6 +200,13 @@ def _forward(xL, xR, c0, u):
 
 
 @njit(inline="always", **JIT)
+def _duration(dist, inv_au, au):
+    """Time the patch takes for ``dist`` at speed ``au``: times 1/|u| (``_inv_speed``), or
+    divided by |u| where 1/|u| would overflow (``inv_au`` = 0)."""
+    return dist * inv_au if inv_au > 0.0 else dist / au
+
+
+@njit(inline="always", **JIT)
 def _walk(U0, xL, xR, c0, a, u, inv_au, dt):
     """Exact creep integration of one cell over a sub-step (uniform-cell model).
 
@@ -236,14 +243,14 @@ def _walk(U0, xL, xR, c0, a, u, inv_au, dt):
     while p < p_end:
         if p < b1:
             q = min(b1, p_end)
-            dtp = (q - p) * inv_au if inv_au > 0.0 else (q - p) / au
+            dtp = _duration(q - p, inv_au, au)
             la = p + a - pL
             IA += A * dtp
             IB += B * dtp + 0.5 * la * dtp * dtp + au * dtp * dtp * dtp / 6.0
             B += dtp * (la + 0.5 * au * dtp)
         elif p < b2:
             q = min(b2, p_end)
-            dtp = (q - p) * inv_au if inv_au > 0.0 else (q - p) / au
+            dtp = _duration(q - p, inv_au, au)
             if wide:
                 ell = pR - pL
                 IA += A * dtp
@@ -267,7 +274,7 @@ def _walk(U0, xL, xR, c0, a, u, inv_au, dt):
                 B = B * (1.0 - em1) + g * em1
         elif p < b3:
             q = min(b3, p_end)
-            dtp = (q - p) * inv_au if inv_au > 0.0 else (q - p) / au
+            dtp = _duration(q - p, inv_au, au)
             la = pR + a - p
             lb = pR + a - q
             if la > 0.0:
@@ -324,14 +331,13 @@ def _walk_content(U0, xL, xR, c0, a, u, inv_au, dt):
     pm = min(p_end, b2)  # end of the growing part (entry, then full)
     e_hi = min(pm, b1)
     B = max(e_hi - p, 0.0) * (0.5 * (e_hi + p) - b0) + ell * max(pm - max(p, b1), 0.0)
-    B = B * inv_au if inv_au > 0.0 else B / au
+    B = _duration(B, inv_au, au)
     A = U0
     if p_end > b2:  # the trailing edge crossed into the cell: d(U/l)/dt = s from pe on
         pe = max(p, b2)
         la = b3 - pe
         lb = max(b3 - p_end, 0.0)
-        dte = min(p_end, b3) - pe
-        dte = dte * inv_au if inv_au > 0.0 else dte / au
+        dte = _duration(min(p_end, b3) - pe, inv_au, au)
         r = lb / la if la > 0.0 else 0.0  # la = 0: cell below the coordinates' rounding step
         A = A * r
         B = B * r + dte * lb
@@ -383,14 +389,13 @@ def _set_radius(U, st, p, a_new, d_new, mu):
     slip = 0.0
     snap = 0.0
     T = 0.0
+    # cells inside the new contact (and so the old) lose nothing: only the edge cells are cut
+    # (with finite friction the inner ones may still snap to their lowered limits)
+    if a_new > 0.0:
+        j0, j1 = _inner_range(i0, i1, c - a_new, c + a_new, x_lo, dx)
+    else:
+        j0, j1 = i1 + 1, i1
     if mu is None:
-        # only the cells at the two edges lose material; the others keep their content
-        j0, j1 = _contact_range(c, a_new, x_lo, dx, n)
-        if a_new <= 0.0 or j1 - j0 < 2:
-            j0, j1 = i1 + 1, i1
-        else:
-            j0 += 1
-            j1 -= 1
         T = st[ST_T]
         for k in _edges(i0, i1, j0, j1):
             i = _edge(k, j0, j1)
@@ -402,11 +407,6 @@ def _set_radius(U, st, p, a_new, d_new, mu):
     else:
         inv3R = 1.0 / (3.0 * p[P_R])
         muEG = mu * p[P_E_OVER_G]
-        # cells inside the new contact (and so the old) lose nothing: a branch-free loop
-        if a_new > 0.0:
-            j0, j1 = _inner_range(i0, i1, c - a_new, c + a_new, x_lo, dx)
-        else:
-            j0, j1 = i1 + 1, i1
         T, slip, snap = _snap_inner(U, j0, j1, x_lo, dx, c, muEG, d_new, inv3R, 1.0 / dx)
         for k in _edges(i0, i1, j0, j1):
             i = _edge(k, j0, j1)
@@ -784,15 +784,9 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
             if mu is not None:
                 # friction limit and 1 / overlap at the end of the sub-step (the commit's
                 # slip work divides by the overlap)
-                lo = max(xL, c1 - a)
-                hi = min(xR, c1 + a)
-                if hi > lo:
-                    val = _inner_content(lo - c1, hi - c1, d, inv3R)
-                    Li = muEG * (val if val > 0.0 else 0.0)
-                    L[L_INV_ELL, i] = 1.0 / (hi - lo)
-                else:
-                    Li = 0.0
-                    L[L_INV_ELL, i] = 0.0
+                ell = _overlap(xL, xR, c1, a)
+                Li = muEG * _normal_content(xL, xR, c1, a, d, inv3R) if ell > 0.0 else 0.0
+                L[L_INV_ELL, i] = 1.0 / ell if ell > 0.0 else 0.0
                 L[0, i] = Li
                 if mass is not None:
                     Ut, dU = _clip_slope(Ai + Bi * sv0, Li, Bi)
