@@ -47,7 +47,7 @@ def _clip(x):
 
 
 @njit(**K.JIT)
-def _env_tick(e, act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass, load,
+def _env_tick(e, act, sv, target, steps, W, st, p, out, obs, extra, mu, mass, load,
               ledger):
     a0 = min(max(act[e, 0], -1.0), 1.0)
     a1 = min(max(act[e, 1], -1.0), 1.0)
@@ -67,7 +67,7 @@ def _env_tick(e, act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu,
     d = cb * cb
     ts = t0 / L0
     n_sub = int(sv[S_NSUB])
-    K._tick(U[e], A[e], B[e], L[e], ste, p[e], d / L0, u * ts, v * ts, 0.0, mu, mass, load,
+    K._tick(W[e], ste, p[e], d / L0, u * ts, v * ts, 0.0, mu, mass, load,
             n_sub, dt / n_sub / t0, out[e], ledger)
     steps[e] += 1
     oe = out[e]
@@ -130,7 +130,7 @@ def _env_bad(e, st, extra):
 
 
 @njit(**K.JIT)
-def env_step_serial(act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass, load,
+def env_step_serial(act, sv, target, steps, W, st, p, out, obs, extra, mu, mass, load,
                     ledger):
     """Step every env one tick.  Returns -1 (nothing stepped) when an action is out of range or
     not finite, else the number of envs left with an error (see ``_env_bad``)."""
@@ -138,21 +138,21 @@ def env_step_serial(act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, 
         return -1
     bad = 0
     for e in range(act.shape[0]):
-        _env_tick(e, act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass, load,
+        _env_tick(e, act, sv, target, steps, W, st, p, out, obs, extra, mu, mass, load,
                   ledger)
         bad += _env_bad(e, st, extra)
     return bad
 
 
 @njit(cache=True, parallel=True, error_model="numpy")  # NRT on: prange needs it
-def env_step_parallel(act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass,
+def env_step_parallel(act, sv, target, steps, W, st, p, out, obs, extra, mu, mass,
                       load, ledger):
     """``env_step_serial`` with the envs spread over threads (prange)."""
     if not _actions_valid(act):
         return -1
     bad = 0
     for e in prange(act.shape[0]):
-        _env_tick(e, act, sv, target, steps, U, A, B, L, st, p, out, obs, extra, mu, mass, load,
+        _env_tick(e, act, sv, target, steps, W, st, p, out, obs, extra, mu, mass, load,
                   ledger)
         bad += _env_bad(e, st, extra)
     return bad

@@ -108,11 +108,23 @@ OUT_N = 6         # normal force
 OUT_STICK = 7     # stuck fraction of the contact length at the end of the tick (1 with mu = inf)
 N_OUT = 8
 
-# rows of the friction work array L (finite friction only; cells along the second axis)
+# rows of the cell work array W (``Drive.cells``, ``BatchCore.cells[e]``; cells along the
+# second axis): the tangential contents U, the build pass's A and B (U_end = A + B s), then,
+# with finite friction only, the friction work rows L = W[W_L:] (L_* below).  One array
+# rather than four separate ones: one argument instead of three for each non-inlined kernel,
+# and one env's rows together in memory
+W_U, W_A, W_B, W_L = 0, 1, 2, 3
+
+# rows of the friction work array L = W[W_L:]
 L_LIMIT = 0      # friction limit mu E*/G* integral of uN over the cell's part in contact
 L_E0, L_E1, L_E2 = 1, 2, 3  # released energy of an edge cell this sub-step: e0 + e1 s + e2 s^2
 L_INV_ELL = 4    # 1 / overlap of an edge cell with the contact at the end of the sub-step (0: none)
 N_LCOL = 5
+
+
+def work_rows(finite_mu: bool) -> int:
+    """Rows of the work array W: U, A, B and, with finite friction, the N_LCOL rows of L."""
+    return W_L + (N_LCOL if finite_mu else 0)
 
 # params vector
 P_R = 0
@@ -366,7 +378,7 @@ def _shrink_cell(U, i, xL, dx, c, a_old, a_new):
 
 
 @njit(**JIT)
-def _set_radius(U, st, p, a_new, d_new, mu):
+def _set_radius(W, st, p, a_new, d_new, mu):
     """Instantaneous change of the indentation to d_new (contact half-width a_new).
 
     Shrinking releases the cut-off part of each edge cell (uniform content); growing adds
@@ -374,6 +386,7 @@ def _set_radius(U, st, p, a_new, d_new, mu):
     lowers every friction limit at once: springs above it snap to it, doing Coulomb work
     (returned, and added to the slip work) and losing the rest of their excess elastic energy
     (``ST_SNAP``)."""
+    U = W[W_U]
     a_old = st[ST_A]
     d_old = st[ST_D]
     st[ST_A] = a_new
@@ -407,7 +420,7 @@ def _set_radius(U, st, p, a_new, d_new, mu):
     else:
         inv3R = 1.0 / (3.0 * p[P_R])
         muEG = mu * p[P_E_OVER_G]
-        T, slip, snap = _snap_inner(U, j0, j1, x_lo, dx, c, muEG, d_new, inv3R, 1.0 / dx)
+        T, slip, snap = _snap_inner(W, j0, j1, x_lo, dx, c, muEG, d_new, inv3R, 1.0 / dx)
         for k in _edges(i0, i1, j0, j1):
             i = _edge(k, j0, j1)
             xL = x_lo + i * dx
@@ -556,11 +569,13 @@ def _limit_sum(L, i0, i1, j0, j1):
 
 
 @njit(**JIT)
-def _stuck_length(U, L, i0, i1, j0, j1, x_lo, dx, c1, a):
+def _stuck_length(W, i0, i1, j0, j1, x_lo, dx, c1, a):
     """Length of the contact whose cells stick (below their friction limit by more than
     1e-12 of it) after a commit: inner cells count dx, edge cells their overlap with the
     contact centred at c1.  Called for the last sub-step of a tick only."""
-    stuck = _stuck_inner(U, L, j0, j1) * dx
+    U = W[W_U]
+    L = W[W_L:]
+    stuck = _stuck_inner(W, j0, j1) * dx
     for k in _edges(i0, i1, j0, j1):
         i = _edge(k, j0, j1)
         Li = L[0, i]
@@ -581,22 +596,22 @@ _FM_INNER = {"reassoc", "nsz"}
 
 
 @njit(fastmath=_FM_INNER, **JIT)
-def _build_inner(U, A, L, j0, j1, x_lo, dx, c1, muEG, d, inv3R, dxdt, sv0, mu, mass):
+def _build_inner(W, j0, j1, x_lo, dx, c1, muEG, d, inv3R, dxdt, sv0, mu, mass):
     """Build pass over the inner cells j0..j1 (A = U; friction limits; runner equation at
     v0).  Returns (SU, Tt0, dT0)."""
     SU = 0.0
     Tt0 = 0.0
     dT0 = 0.0
     for i in _cells(j0, j1 + 1):
-        Ai = U[i]
-        A[i] = Ai  # B[i] = dx dt is written only for _solve_bracketed, which reads it
+        Ai = W[W_U, i]
+        W[W_A, i] = Ai  # B = dx dt is written only for _solve_bracketed, which reads it
         SU += Ai
         if mu is not None:
             zl = (x_lo + i * dx) - c1
             Li = muEG * dx * (d - (zl * zl + zl * (zl + dx) + (zl + dx) * (zl + dx)) * inv3R)
             if Li < 0.0:
                 Li = 0.0
-            L[0, i] = Li
+            W[W_L + L_LIMIT, i] = Li
             if mass is not None:
                 Ut, dU = _clip_slope(Ai + dxdt * sv0, Li, dxdt)
                 Tt0 += Ut
@@ -605,39 +620,39 @@ def _build_inner(U, A, L, j0, j1, x_lo, dx, c1, muEG, d, inv3R, dxdt, sv0, mu, m
 
 
 @njit(fastmath=_FM_INNER, **JIT)
-def _commit_inner(U, A, L, j0, j1, dxdt, s, inv_dx, mu, mass):
+def _commit_inner(W, j0, j1, dxdt, s, inv_dx, mu, mass):
     """Commit of the inner cells j0..j1.  Returns (T1, Ta, slip, clipped)."""
     T1 = 0.0
     Ta = 0.0
     slip = 0.0
     clipped = False
     for i in _cells(j0, j1 + 1):
-        Ut = A[i] + dxdt * s
+        Ut = W[W_A, i] + dxdt * s
         if mu is not None:
-            Li = L[0, i]
+            Li = W[W_L + L_LIMIT, i]
             ex = abs(Ut) - Li
             clipped |= ex > 0.0
             slip += Li * ex * inv_dx if ex > 0.0 else 0.0  # not inf * 0
             Ut = Li if Ut > Li else (-Li if Ut < -Li else Ut)
             if mass is not None:
                 Ta += abs(Ut)
-        U[i] = Ut
+        W[W_U, i] = Ut
         T1 += Ut
     return T1, Ta, slip, clipped
 
 
 @njit(fastmath=_FM_INNER, **JIT)
-def _stuck_inner(U, L, j0, j1):
+def _stuck_inner(W, j0, j1):
     """Number of the inner cells j0..j1 that stick (see ``_stuck_length``), as a float."""
     n_stuck = 0.0
     for i in _cells(j0, j1 + 1):
-        Li = L[0, i]
-        n_stuck += 1.0 if abs(U[i]) - Li < -1e-12 * Li else 0.0
+        Li = W[W_L + L_LIMIT, i]
+        n_stuck += 1.0 if abs(W[W_U, i]) - Li < -1e-12 * Li else 0.0
     return n_stuck
 
 
 @njit(fastmath=_FM_INNER, **JIT)
-def _snap_inner(U, j0, j1, x_lo, dx, c, muEG, d_new, inv3R, inv_dx):
+def _snap_inner(W, j0, j1, x_lo, dx, c, muEG, d_new, inv3R, inv_dx):
     """Load drop over the inner cells j0..j1 (inside the new contact: nothing cut off, overlap
     dx): contents above the new friction limit snap to it.  Returns (sum of the contents,
     Coulomb work, elastic energy lost beyond it)."""
@@ -648,26 +663,27 @@ def _snap_inner(U, j0, j1, x_lo, dx, c, muEG, d_new, inv3R, inv_dx):
         zl = (x_lo + i * dx) - c
         val = _inner_content(zl, zl + dx, d_new, inv3R)
         Li = muEG * (val if val > 0.0 else 0.0)
-        Ui = U[i]
+        Ui = W[W_U, i]
         ex = abs(Ui) - Li
         over = ex > 0.0
         slip += Li * ex * inv_dx if over else 0.0
         snap += 0.5 * ex * ex * inv_dx if over else 0.0
         Ui = Li if Ui > Li else (-Li if Ui < -Li else Ui)
-        U[i] = Ui
+        W[W_U, i] = Ui
         T += Ui
     return T, slip, snap
 
 
 @njit(**JIT)
-def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
+def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
     """Advance one control tick of n_sub sub-steps with piecewise-constant inputs.
 
     d: indentation, u: omega R (signed), v: sphere translation rate (signed),
     vs_presc: runner velocity when ``mass is None`` (prescribed runner), else ignored.
     mu / mass / load: float or None (infinite friction / prescribed runner / no load).
-    L: work array of shape (N_LCOL, n) with finite friction (friction limit, the
-    released-energy coefficients and 1 / overlap of edge cells), unused otherwise.
+    W: work array of shape (``work_rows(mu is not None)``, n): U, A, B and, with finite
+    friction, L = W[W_L:] (friction limit, the released-energy coefficients and 1 / overlap
+    of edge cells).
     ledger: True keeps the impulse and the energy ledger (``ST_IMP``, ``ST_REL``,
     ``ST_DRIVE``, ``ST_RUNNER``, ``ST_EXT``, ``OUT_IMP``); None leaves them out (the env needs
     neither: its observation, reward and info use T, v*, x*, the slip work and the stuck
@@ -683,6 +699,10 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
     ledger, ``_walk_content`` without).  B of those inner cells is written only before a call
     of ``_solve_bracketed`` (its only reader); elsewhere it holds stale values.
     """
+    U = W[W_U]
+    A = W[W_A]
+    B = W[W_B]
+    L = W[W_L:]
     R = p[P_R]
     EG = p[P_E_OVER_G]
     x_lo = p[P_X_LO]
@@ -696,7 +716,7 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
         muEG = mu * EG
     a = math.sqrt(R * d) if d > 0.0 else 0.0
     inv_au = _inv_speed(u)
-    slip_tick = _set_radius(U, st, p, a, d, mu)
+    slip_tick = _set_radius(W, st, p, a, d, mu)
     s0 = u - v
     F = 0.0
     if load is not None:
@@ -747,7 +767,7 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
             j1 = i1
         n_in = j1 - j0 + 1
         # ------------------------------------------------ build: inner cells (A = U, B = dx dt)
-        SU, Tt0, dT0 = _build_inner(U, A, L, j0, j1, x_lo, dx, c1, muEG, d, inv3R, dxdt, sv0,
+        SU, Tt0, dT0 = _build_inner(W, j0, j1, x_lo, dx, c1, muEG, d, inv3R, dxdt, sv0,
                                     mu, mass)
         if n_in > 0:
             SA += SU
@@ -833,7 +853,7 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
             rel = 0.0
             # inner cells (branch-free: a cell beyond its limit slides to it, adding the
             # slip work; the others add exactly 0 to it)
-            T1, Ta, slip, clipped = _commit_inner(U, A, L, j0, j1, dxdt, s, inv_dx, mu, mass)
+            T1, Ta, slip, clipped = _commit_inner(W, j0, j1, dxdt, s, inv_dx, mu, mass)
             # edge cells
             for k in _edges(i0, i1, j0, j1):
                 i = _edge(k, j0, j1)
@@ -886,7 +906,7 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
             v1 = _solve_bracketed(A, B, L, i0, i1, s0, v0, v1, mass, F, dt, st)
             iters = st[ST_ITER]
         if last and mu is not None:
-            stuck = _stuck_length(U, L, i0, i1, j0, j1, x_lo, dx, c1, a)
+            stuck = _stuck_length(W, i0, i1, j0, j1, x_lo, dx, c1, a)
         xs += v1 * dt
         xsph += v * dt
         slip_acc += slip
@@ -933,10 +953,10 @@ def _tick(U, A, B, L, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, 
 
 
 @njit(**JIT)
-def run_ticks(U, A, B, L, st, p, d, u, v, vs, mu, mass, load, n_sub, dt, out):
+def run_ticks(W, st, p, d, u, v, vs, mu, mass, load, n_sub, dt, out):
     """Run len(d) ticks; out has shape (len(d), N_OUT).  Stops at the first error flag."""
     for k in range(d.shape[0]):
-        _tick(U, A, B, L, st, p, d[k], u[k], v[k], vs[k], mu, mass, load, n_sub, dt, out[k], True)
+        _tick(W, st, p, d[k], u[k], v[k], vs[k], mu, mass, load, n_sub, dt, out[k], True)
         if st[ST_FLAG] != 0.0 and (int(st[ST_FLAG]) & (FLAG_NONFINITE | FLAG_GRID)) != 0:
             return k + 1
     return d.shape[0]

@@ -176,8 +176,8 @@ def specialisation(ticks=300, scenes=None):
         full = BatchCore(64, scene=sc)
         mu, mass, load, _ = full.features
         full.features = (1e30 if mu is None else mu, mass, 0.0 if load is None else load, True)
-        if full.L.shape[2] == 1:
-            full.L = np.zeros((full.num_envs, K.N_LCOL, full.U.shape[1]))
+        if full.cells.shape[1] < K.work_rows(True):  # infinite friction: no friction rows
+            full.cells = np.zeros((full.num_envs, K.work_rows(True), full.cells.shape[2]))
         for c in (spec, full):
             c._step_fn = __import__("rolling_env._envkernel", fromlist=["x"]).env_step_serial
         r_spec, _ = _core_rate(spec, ticks)
@@ -289,12 +289,12 @@ n = {n}
 if n == 1:
     x = gym.make("RollingDrive-v0"); x.reset(seed=0); x.step(x.action_space.sample())
     d = x.unwrapped.drive
-    arrs = [d.U, d.A, d.B, d.L, d.st]
+    arrs = [d.cells, d.st]
 else:
     x = gym.make_vec("RollingDrive-v0", num_envs=n); x.reset(seed=0)
     x.step(np.zeros((n, 3), dtype=np.float32))
     c = x.core
-    arrs = [c.U, c.A, c.B, c.L, c.st, c.p, c.obs, c.out, c.extra]
+    arrs = [c.cells, c.st, c.p, c.obs, c.out, c.extra]
 print(base, peak(), sum(a.nbytes for a in arrs))
 """
 

@@ -139,8 +139,7 @@ class RollingDriveEnv(gym.Env):
         """Batch-of-one views of the drive's arrays for the env kernel (made once, not per
         step: a view costs about as much as the rest of the step's Python layer)."""
         drv = self.drive
-        self._arrays = (drv.U[None], drv.A[None], drv.B[None], drv.L[None], drv.st[None],
-                        drv._p[None])
+        self._arrays = (drv.cells[None], drv.st[None], drv._p[None])
 
     def __getstate__(self):
         # pickle and deepcopy would turn the views into independent copies: the kernel would
@@ -172,9 +171,9 @@ class RollingDriveEnv(gym.Env):
 
     def step(self, action):
         a = load_actions(action, (3,), self._act)
-        U, A, B, L, st, p = self._arrays
-        bad = EK.env_step_serial(self._act, self._sv, self._target, self._steps, U, A, B, L, st,
-                                 p, self._out, self._obs, self._extra, *self._features)
+        W, st, p = self._arrays
+        bad = EK.env_step_serial(self._act, self._sv, self._target, self._steps, W, st, p,
+                                 self._out, self._obs, self._extra, *self._features)
         if bad:
             raise_step_error(bad, a, (3,), st)
         x = self._extra[0]

@@ -159,13 +159,29 @@ class Drive:
         self._mass = params.m / self.M0 if free else None
         self._load = params.F_ext / self.F0 if load else None
         self._check_scales()
-        self.U = np.zeros(n)
-        self.A = np.zeros(n)
-        self.B = np.zeros(n)
-        # friction work array (limits, edge release coefficients): none without friction
-        self.L = np.zeros((K.N_LCOL, n if finite_mu else 1))
+        # cell work array: contents U, build rows A and B and, with friction only, the friction
+        # work rows L (limits, edge release coefficients); U, A, B and L are views of it
+        self.cells = np.zeros((K.work_rows(finite_mu), n))
         self.st = np.zeros(K.N_STATE)
         self.ledger = True  # run() keeps the impulse and energy ledger; the env kernel does not
+
+    @property
+    def U(self) -> np.ndarray:
+        """Tangential content of each cell (view of the work array ``cells``; G* = 1 units)."""
+        return self.cells[K.W_U]
+
+    @property
+    def A(self) -> np.ndarray:
+        return self.cells[K.W_A]
+
+    @property
+    def B(self) -> np.ndarray:
+        return self.cells[K.W_B]
+
+    @property
+    def L(self) -> np.ndarray:
+        """Friction work rows (``K.L_*``); none (0 rows) with infinite friction."""
+        return self.cells[K.W_L:]
 
     def _check_scales(self):
         """The kernel works in units of a_ref, t_ref and G* a_ref^2: every scale and scaled
@@ -292,7 +308,7 @@ class Drive:
                              f"a_max {self.grid.a_max * self.L0:.3e} m")
         ts = self.t0 / self.L0
         out = np.zeros((k, K.N_OUT))
-        done = K.run_ticks(self.U, self.A, self.B, self.L, self.st, self._p,
+        done = K.run_ticks(self.cells, self.st, self._p,
                            dd / self.L0, u * ts, vv * ts, vs * ts,
                            self._mu, self._mass, self._load, int(n_sub),
                            dt_tick / n_sub / self.t0, out)

@@ -66,10 +66,7 @@ class BatchCore:
         self.features = drive.kernel_features + (None,)  # (mu, mass, load, ledger)
         self.sv = EK.scene_vector(self.scene, self.a_max, drive)
         m = drive.grid.n
-        self.U = np.zeros((n, m))
-        self.A = np.zeros((n, m))
-        self.B = np.zeros((n, m))
-        self.L = np.zeros((n,) + drive.L.shape)
+        self.cells = np.zeros((n,) + drive.cells.shape)  # per env: U, A, B (and L), see _kernel
         self.st = np.zeros((n, K.N_STATE))
         self.p = np.tile(drive._p, (n, 1))
         self.target = np.zeros(n)
@@ -80,6 +77,11 @@ class BatchCore:
         self.extra = np.zeros((n, EK.N_X))
         self.rngs = [seeding.np_random(None)[0] for _ in range(n)]
         self._step_fn = EK.env_step_parallel if n >= PARALLEL_MIN_ENVS else EK.env_step_serial
+
+    @property
+    def U(self) -> np.ndarray:
+        """Cell contents of every env, shape (num_envs, cells): a view of ``cells``."""
+        return self.cells[:, K.W_U]
 
     def seed(self, seed=None):
         """Env i gets seed + i (Gymnasium's convention); None draws fresh entropy.  A sequence
@@ -130,9 +132,8 @@ class BatchCore:
     def step(self, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Advance every env one tick; returns (obs float32, rewards, truncated)."""
         a = load_actions(actions, (self.num_envs, 3), self.act)
-        bad = self._step_fn(self.act, self.sv, self.target, self.steps, self.U, self.A, self.B,
-                            self.L, self.st, self.p, self.out, self.obs, self.extra,
-                            *self.features)
+        bad = self._step_fn(self.act, self.sv, self.target, self.steps, self.cells, self.st, self.p,
+                            self.out, self.obs, self.extra, *self.features)
         if bad:
             raise_step_error(bad, a, (self.num_envs, 3), self.st)
         return self.obs.copy(), self.extra[:, EK.X_REWARD].copy(), \

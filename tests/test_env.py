@@ -359,7 +359,9 @@ def test_scene_features_pick_the_kernel():
     """Leaving out: infinite friction keeps no friction-limit array, no load keeps no load term."""
     inf = gym.make("RollingDrive-v0", scene="heavy_inf_friction").unwrapped.drive
     loaded = gym.make("RollingDrive-v0", scene="loaded").unwrapped.drive
-    assert inf._mu is None and inf.L.shape[1] == 1 and inf._load is None
+    assert inf._mu is None and inf.L.shape[0] == 0 and inf.cells.shape[0] == 3, \
+        f"infinite friction keeps {inf.L.shape[0]} friction rows"
+    assert inf._load is None
     assert loaded._mu is not None and loaded._load is not None
 
 

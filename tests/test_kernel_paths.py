@@ -105,9 +105,9 @@ def test_kernels_compile_without_reference_counting():
 
 
 @njit
-def _run(U, A, B, L, st, p, d, u, v, mu, mass, load, n_sub, dt, outs, ledger):
+def _run(W, st, p, d, u, v, mu, mass, load, n_sub, dt, outs, ledger):
     for k in range(d.shape[0]):
-        K._tick(U, A, B, L, st, p, d[k], u[k], v[k], 0.0, mu, mass, load, n_sub, dt, outs[k],
+        K._tick(W, st, p, d[k], u[k], v[k], 0.0, mu, mass, load, n_sub, dt, outs[k],
                 ledger)
 
 
@@ -139,9 +139,9 @@ def test_env_path_matches_the_ledger_path(scene):
     mu, mass, load, _ = core.features
     outs = {}
     for ledger in (True, None):
-        U, A, B, L, st = (x[0].copy() for x in (core.U, core.A, core.B, core.L, core.st))
+        W, st = (x[0].copy() for x in (core.cells, core.st))
         out = np.zeros((d.size, K.N_OUT))
-        _run(U, A, B, L, st, core.p[0], d, u, v, mu, mass, load, n_sub, dt, out, ledger)
+        _run(W, st, core.p[0], d, u, v, mu, mass, load, n_sub, dt, out, ledger)
         assert st[K.ST_FLAG] == 0, f"{scene}: flags {st[K.ST_FLAG]} (contact left the row?)"
         outs[ledger] = out
     ref, env = outs[True], outs[None]

@@ -244,7 +244,7 @@ def test_zero_feature_equals_feature_off():
         drv = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, m=1e-3), stroke=wave.stroke)
         drv.reset()
         drv._mu, drv._load = mu, load
-        drv.L = np.zeros((K.N_LCOL, drv.grid.n))
+        drv.cells = np.zeros((K.work_rows(True), drv.grid.n))  # friction rows for mu = 1e12
         outs.append(drv.run(dt_tick=wave.dt_tick(2), n_sub=20, omega_R=u, v=v, d=d)["xstar"])
     assert np.array_equal(outs[0], outs[1]), "load 0.0 must equal no load exactly"
     assert np.max(np.abs(outs[0] - outs[2])) < 1e-12 * np.max(np.abs(outs[0])) + 1e-300
