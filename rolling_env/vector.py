@@ -50,8 +50,8 @@ class BatchCore:
     """N envs of one scene: state arrays with a leading env axis, ``step``, ``reset(mask)``."""
 
     #: attributes holding one entry per env (leading axis num_envs); the rest is shared
-    PER_ENV = frozenset({"U", "A", "B", "L", "st", "p", "target", "steps", "act", "out",
-                         "obs", "extra", "rngs"})
+    PER_ENV = frozenset({"cells", "U", "A", "B", "L", "st", "p", "target", "steps", "act",
+                         "out", "obs", "extra", "rngs"})
 
     def __init__(self, num_envs: int, scene="default", max_episode_steps=None, **overrides):
         if (isinstance(num_envs, (bool, np.bool_)) or not isinstance(num_envs, numbers.Integral)
@@ -82,6 +82,19 @@ class BatchCore:
     def U(self) -> np.ndarray:
         """Cell contents of every env, shape (num_envs, cells): a view of ``cells``."""
         return self.cells[:, K.W_U]
+
+    @property
+    def A(self) -> np.ndarray:
+        return self.cells[:, K.W_A]
+
+    @property
+    def B(self) -> np.ndarray:
+        return self.cells[:, K.W_B]
+
+    @property
+    def L(self) -> np.ndarray:
+        """Friction work rows of every env (``K.L_*``; none with infinite friction)."""
+        return self.cells[:, K.W_L:]
 
     def seed(self, seed=None):
         """Env i gets seed + i (Gymnasium's convention); None draws fresh entropy.  A sequence

@@ -170,6 +170,25 @@ def test_shared_attributes_stay_shared_whatever_the_batch_size():
         v.set_attr("sv", sv, indices=[1])
 
 
+def test_per_env_names_every_array_with_an_env_axis():
+    """``BatchCore.PER_ENV`` (which SB3's get_attr slices per env and set_attr refuses as
+    physics state) names exactly the attributes and properties with one entry per env: with 3
+    envs (no shared array has 3 rows), every array or list of length 3 is in it and everything
+    in it has length 3.  And get_attr("cells") gives each env its own rows."""
+    v = RollingDriveVecEnv(3)
+    core = v.core
+    names = set(vars(core)) | {k for k, x in vars(BatchCore).items() if isinstance(x, property)}
+    per_env = {k for k in names
+               if isinstance(getattr(core, k), (np.ndarray, list)) and len(getattr(core, k)) == 3}
+    assert per_env == set(BatchCore.PER_ENV), (
+        f"per-env attributes not in PER_ENV: {sorted(per_env - BatchCore.PER_ENV)}; "
+        f"in PER_ENV but not per env: {sorted(BatchCore.PER_ENV - per_env)}")
+    cells = v.get_attr("cells", indices=[1])[0]
+    assert cells.shape == core.cells.shape[1:] and np.shares_memory(cells, core.cells[1])
+    with pytest.raises(AttributeError, match="read-only|per-env"):
+        v.set_attr("cells", 0.0, indices=[0])
+
+
 @pytest.mark.parametrize("name,value", [("scene", "resonant"), ("num_envs", 5),
                                         ("features", (None, None, None, None))])
 def test_sb3_set_attr_refuses_what_is_fixed_at_construction(name, value):
