@@ -43,9 +43,9 @@ Compiler options (``JIT``, for every kernel here and in ``_envkernel``):
   owns for the whole call.  With counting on, every call of a non-inlined kernel and every
   per-env view (then ``U[e]``, ``A[e]``, ...; now ``W[e]``) counted its arrays up and down with
   atomic operations, about 45 per env step (measured with the four separate cell arrays of
-  before the work array W): 5% of the serial kernel, and in the threaded batch both threads contended for the
-  same counters (aggregate +12% without them).  A kernel that allocated would fail to
-  compile, not misbehave.  ``env_step_parallel`` keeps counting (prange needs it).
+  before the work array W): 5% of the serial kernel, and in the threaded batch both threads
+  contended for the same counters (aggregate +12% without them).  A kernel that allocated
+  would fail to compile, not misbehave.  ``env_step_parallel`` keeps counting (prange needs it).
 """
 from __future__ import annotations
 

@@ -105,7 +105,30 @@ class Grid:
         self.x_lo = 0.5 * (self.c_min + self.c_max) - 0.5 * self.n * self.dx + self.offset * self.dx
 
 
-class Drive:
+class CellViews:
+    """Named read-only views of the cell work array ``self.cells`` (rows ``K.W_*`` on the
+    second-to-last axis, so one drive's (rows, n) and a batch's (envs, rows, n) alike)."""
+
+    @property
+    def U(self) -> np.ndarray:
+        """Tangential content of each cell (G* = 1 units)."""
+        return self.cells[..., K.W_U, :]
+
+    @property
+    def A(self) -> np.ndarray:
+        return self.cells[..., K.W_A, :]
+
+    @property
+    def B(self) -> np.ndarray:
+        return self.cells[..., K.W_B, :]
+
+    @property
+    def L(self) -> np.ndarray:
+        """Friction work rows (``K.L_*``); none (0 rows) with infinite friction."""
+        return self.cells[..., K.W_L:, :]
+
+
+class Drive(CellViews):
     """One MDR spring row with its runner, advanced tick by tick.
 
     Parameters
@@ -164,24 +187,6 @@ class Drive:
         self.cells = np.zeros((K.work_rows(finite_mu), n))
         self.st = np.zeros(K.N_STATE)
         self.ledger = True  # run() keeps the impulse and energy ledger; the env kernel does not
-
-    @property
-    def U(self) -> np.ndarray:
-        """Tangential content of each cell (view of the work array ``cells``; G* = 1 units)."""
-        return self.cells[K.W_U]
-
-    @property
-    def A(self) -> np.ndarray:
-        return self.cells[K.W_A]
-
-    @property
-    def B(self) -> np.ndarray:
-        return self.cells[K.W_B]
-
-    @property
-    def L(self) -> np.ndarray:
-        """Friction work rows (``K.L_*``); none (0 rows) with infinite friction."""
-        return self.cells[K.W_L:]
 
     def _check_scales(self):
         """The kernel works in units of a_ref, t_ref and G* a_ref^2: every scale and scaled

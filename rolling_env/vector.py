@@ -31,6 +31,7 @@ from . import _kernel as K
 from .env import (OBS_NAMES, build_drive, check_action_dtype, check_actions, check_time_limit,
                   info_arrays, info_dict, load_actions, raise_step_error, sample_target,
                   target_option)
+from .model import CellViews
 from .scenes import load_scene
 
 PARALLEL_MIN_ENVS = 4
@@ -46,7 +47,7 @@ def _check_seed(seed, name: str) -> int:
     return int(seed)
 
 
-class BatchCore:
+class BatchCore(CellViews):
     """N envs of one scene: state arrays with a leading env axis, ``step``, ``reset(mask)``."""
 
     #: attributes holding one entry per env (leading axis num_envs); the rest is shared
@@ -77,24 +78,6 @@ class BatchCore:
         self.extra = np.zeros((n, EK.N_X))
         self.rngs = [seeding.np_random(None)[0] for _ in range(n)]
         self._step_fn = EK.env_step_parallel if n >= PARALLEL_MIN_ENVS else EK.env_step_serial
-
-    @property
-    def U(self) -> np.ndarray:
-        """Cell contents of every env, shape (num_envs, cells): a view of ``cells``."""
-        return self.cells[:, K.W_U]
-
-    @property
-    def A(self) -> np.ndarray:
-        return self.cells[:, K.W_A]
-
-    @property
-    def B(self) -> np.ndarray:
-        return self.cells[:, K.W_B]
-
-    @property
-    def L(self) -> np.ndarray:
-        """Friction work rows of every env (``K.L_*``; none with infinite friction)."""
-        return self.cells[:, K.W_L:]
 
     def seed(self, seed=None):
         """Env i gets seed + i (Gymnasium's convention); None draws fresh entropy.  A sequence

@@ -177,7 +177,8 @@ def test_per_env_names_every_array_with_an_env_axis():
     in it has length 3.  And get_attr("cells") gives each env its own rows."""
     v = RollingDriveVecEnv(3)
     core = v.core
-    names = set(vars(core)) | {k for k, x in vars(BatchCore).items() if isinstance(x, property)}
+    names = set(vars(core)) | {k for cls in BatchCore.__mro__ for k, x in vars(cls).items()
+                              if isinstance(x, property)}
     per_env = {k for k in names
                if isinstance(getattr(core, k), (np.ndarray, list)) and len(getattr(core, k)) == 3}
     assert per_env == set(BatchCore.PER_ENV), (
