@@ -318,12 +318,16 @@ def check_actions(action, shape) -> np.ndarray:
 
 
 INFO_COLUMNS = {  # info key: column of the env kernel's extras (see _envkernel.X_*)
-    "reward_track": EK.X_TRACK, "reward_wear": EK.X_WEAR, "xstar": EK.X_XS, "vstar": EK.X_VS,
-    "slip_work": EK.X_SLIP, "N": EK.X_N, "T": EK.X_T, "stick_fraction": EK.X_STICK,
-    "omega_R": EK.X_U, "v": EK.X_V, "saturation": EK.X_SAT,
+    "reward_track": EK.X_TRACK, "reward_wear": EK.X_WEAR, "saturation": EK.X_SAT,
+    "omega_R": EK.X_U, "v": EK.X_V, "N": EK.X_N, "T": EK.X_T, "slip_work": EK.X_SLIP,
+    "stick_fraction": EK.X_STICK, "xstar": EK.X_XS, "vstar": EK.X_VS,
 }
 _INFO_KEYS = tuple(INFO_COLUMNS)
-_INFO_IDX = np.array(list(INFO_COLUMNS.values()))  # for the batched gather
+# the info columns are one block of the extras, in the order of INFO_COLUMNS: the batched
+# infos take them with one slice rather than a gather
+_INFO_LO = min(INFO_COLUMNS.values())
+_INFO_HI = _INFO_LO + len(INFO_COLUMNS)
+assert list(INFO_COLUMNS.values()) == list(range(_INFO_LO, _INFO_HI)), "X_* order changed"
 
 
 def info_dict(x, target) -> dict:
@@ -340,7 +344,7 @@ def info_dict(x, target) -> dict:
 
 def info_arrays(extra, target) -> dict:
     """``info_dict`` of every env as arrays (float64; saturated bool), one entry per env."""
-    d = dict(zip(_INFO_KEYS, extra[:, _INFO_IDX].T.copy()))  # one gather, rows as views
+    d = dict(zip(_INFO_KEYS, extra[:, _INFO_LO:_INFO_HI].T.copy()))  # one copy, rows as views
     d["target"] = np.array(target, dtype=np.float64)
     d["error"] = target - extra[:, EK.X_XS]
     d["saturated"] = extra[:, EK.X_SAT] < 1.0
