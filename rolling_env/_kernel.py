@@ -605,11 +605,9 @@ def _build_inner(W, j0, j1, x_lo, dx, c1, muEG, d, inv3R, dxdt, sv0, mu, mass):
     dT0 = 0.0
     for i in _cells(j0, j1 + 1):
         Ai = W[W_U, i]
-        W[W_A, i] = Ai
+        W[W_A, i] = Ai  # B = dx dt is written only for _solve_bracketed, which reads it
         SU += Ai
-        if mu is None:
-            W[W_B, i] = dxdt  # for _commit_all (with friction it selects dx dt instead)
-        else:
+        if mu is not None:
             zl = (x_lo + i * dx) - c1
             Li = muEG * dx * (d - (zl * zl + zl * (zl + dx) + (zl + dx) * (zl + dx)) * inv3R)
             if Li < 0.0:
@@ -623,12 +621,13 @@ def _build_inner(W, j0, j1, x_lo, dx, c1, muEG, d, inv3R, dxdt, sv0, mu, mass):
 
 
 @njit(fastmath=_FM_INNER, **JIT)
-def _commit_all(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass):
-    """Commit of every cell i0..i1, U = A + B s clipped to the friction limit: the inner
-    cells j0..j1 with B = dx dt and overlap dx, the edge cells with the B and 1 / overlap the
-    build pass stored for them, in one loop (a select per cell rather than a separate scalar
-    loop over the few edge cells: 7% of the default env step).  Returns (T1, Ta, slip,
-    clipped)."""
+def _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass, edges):
+    """Commit of the cells i0..i1, U = A + B s clipped to the friction limit.  Returns (T1,
+    Ta, slip, clipped).  ``edges`` None: i0..i1 are inner cells (B = dx dt, overlap dx).
+    ``edges`` True: every cell of the contact, the inner cells j0..j1 as above and the edge
+    cells with the B and 1 / overlap the build pass stored for them, in one loop (a select
+    per cell instead of a separate scalar loop over the few edge cells: 7% of the default env
+    step; for the inner cells alone the selects and their loads cost more than they save)."""
     T1 = 0.0
     Ta = 0.0
     slip = 0.0
@@ -636,15 +635,18 @@ def _commit_all(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass):
     j_lo = uint64(j0)  # i0 <= j0 <= i1 + 1
     n_in = uint64(max(j1 - j0 + 1, 0))
     for i in _cells(i0, i1 + 1):
-        inner = (i - j_lo) < n_in  # unsigned: wraps to a large number below j0
-        Bm = W[W_B, i]  # loaded unconditionally so that the choice below is a select
-        if mu is not None:
-            Bm = dxdt if inner else Bm
-        Ut = W[W_A, i] + Bm * s
+        Bi = dxdt
+        ie = inv_dx
+        if edges is not None:
+            inner = (i - j_lo) < n_in  # unsigned: wraps to a large number below j0
+            Bm = W[W_B, i]  # loaded unconditionally so that the choices are selects
+            Bi = dxdt if inner else Bm
+            if mu is not None:
+                im = W[W_L + L_INV_ELL, i]
+                ie = inv_dx if inner else im
+        Ut = W[W_A, i] + Bi * s
         if mu is not None:
             Li = W[W_L + L_LIMIT, i]
-            ie = W[W_L + L_INV_ELL, i]
-            ie = inv_dx if inner else ie
             ex = abs(Ut) - Li
             over = ex > 0.0
             clipped |= over
@@ -712,8 +714,9 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
     Cells inside the contact for the whole sub-step (A = U, B = dx dt) take a branch-free
     build loop (``_build_inner``); only the few edge cells are integrated one by one
     (``_walk`` with the ledger, ``_walk_content`` without).  The commit takes every cell in
-    one branch-free loop (``_commit_all``).  Both loops' sums may be reordered so that LLVM
-    vectorises them.  With finite friction, B of the inner cells is written only before a
+    one branch-free loop (``_commit``) in the env with friction; elsewhere (no friction, or the
+    ledger) the inner cells take that loop and the edge cells a scalar one.  The loops' sums
+    may be reordered so that LLVM vectorises them.  With finite friction, B of the inner cells is written only before a
     call of ``_solve_bracketed`` (the commit uses dx dt for them); elsewhere it holds stale
     values.
     """
@@ -869,35 +872,56 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
         for attempt in range(2):
             s = s0 - v1
             rel = 0.0
-            # every cell in one branch-free loop (inner cells: B = dx dt and overlap dx; edge
-            # cells: the B and 1 / overlap of the build pass): a cell beyond its limit
-            # slides to it, adding the slip work; the others add exactly 0 to it
-            T1, Ta, slip, clipped = _commit_all(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass)
-            if ledger is not None and mu is not None and a > 0.0:
-                # the deflection an edge cell released this sub-step, from the creep
-                # integral, can be no larger than the friction limit allows (the released
-                # material is at the limit once the cell slides)
-                for k in _edges(i0, i1, j0, j1):
-                    i = _edge(k, j0, j1)
-                    Ut = A[i] + B[i] * s  # unclipped, as in _commit_all
+            # branch-free (a cell beyond its limit slides to it, adding the slip work; the
+            # others add exactly 0 to it): the env with friction commits every cell in one
+            # loop (inner cells: B = dx dt and overlap dx; edge cells: the B and 1 / overlap
+            # of the build pass); otherwise the inner cells, then the edge cells one by one
+            # (with the ledger: their released energy)
+            if ledger is None and mu is not None:
+                T1, Ta, slip, clipped = _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass,
+                                                True)
+                e_hi = i0 - 1  # no edge cell left
+            else:
+                T1, Ta, slip, clipped = _commit(W, j0, j1, j0, j1, dxdt, s, inv_dx, mu, mass,
+                                                None)
+                e_hi = i1
+            for k in _edges(i0, e_hi, j0, j1):
+                i = _edge(k, j0, j1)
+                Ut = A[i] + B[i] * s
+                if mu is not None:
                     Li = L[0, i]
-                    ei = L[L_E0, i] + s * (L[L_E1, i] + s * L[L_E2, i])
-                    if abs(Ut) > Li and Ut != 0.0:
-                        ei *= (Li / Ut) * (Li / Ut)
-                    elif Li == 0.0 and ei > 0.0:
-                        # a cell that left the contact entirely (Ut = Li = 0) released no
-                        # more than it could hold where the contact centre came closest to
-                        # it in the sub-step (limit and overlap both peak there): bounds its
-                        # unclipped creep integral.  For a cell on the trailing half (the
-                        # usual case: the patch moves less than a per sub-step) that point
-                        # is c0.
-                        xL = x_lo + i * dx
-                        cn = min(max(xL + 0.5 * dx, min(c0, c1)), max(c0, c1))
-                        ln = _overlap(xL, xL + dx, cn, a)
-                        if ln > 0.0:
-                            Ln = muEG * _normal_content(xL, xL + dx, cn, a, d, inv3R)
-                            ei = min(ei, 0.5 * Ln * Ln / ln)
-                    rel += ei
+                    if ledger is not None and a > 0.0:
+                        # the deflection an edge cell released this sub-step, from the creep
+                        # integral, can be no larger than the friction limit allows (the
+                        # released material is at the limit once the cell slides)
+                        ei = L[L_E0, i] + s * (L[L_E1, i] + s * L[L_E2, i])
+                        if abs(Ut) > Li and Ut != 0.0:
+                            ei *= (Li / Ut) * (Li / Ut)
+                        elif Li == 0.0 and ei > 0.0:
+                            # a cell that left the contact entirely (Ut = Li = 0) released no
+                            # more than it could hold where the contact centre came closest
+                            # to it in the sub-step (limit and overlap both peak there): bounds
+                            # its unclipped creep integral.  For a cell on the trailing half
+                            # (the usual case: the patch moves less than a per sub-step) that
+                            # point is c0.
+                            xL = x_lo + i * dx
+                            cn = min(max(xL + 0.5 * dx, min(c0, c1)), max(c0, c1))
+                            ln = _overlap(xL, xL + dx, cn, a)
+                            if ln > 0.0:
+                                Ln = muEG * _normal_content(xL, xL + dx, cn, a, d, inv3R)
+                                ei = min(ei, 0.5 * Ln * Ln / ln)
+                        rel += ei
+                    # a cell beyond its limit slides to it (as in _commit)
+                    ex = abs(Ut) - Li
+                    over = ex > 0.0
+                    clipped |= over
+                    inv_ell = L[L_INV_ELL, i]
+                    slip += Li * ex * inv_ell if (over and inv_ell > 0.0) else 0.0
+                    Ut = Li if Ut > Li else (-Li if Ut < -Li else Ut)
+                    if mass is not None:
+                        Ta += abs(Ut)
+                U[i] = Ut
+                T1 += Ut
             if mu is None or mass is None or not fast:
                 break
             # verify the one-step root: g(v1) vanishes unless the step crossed a kink
