@@ -261,8 +261,11 @@ def naive_equal_accuracy():
         return None
     case = (0.7, 0.1, 2.5)
     ref = analytic.eq32(*case)
-    r, t_ours = _best_time(lambda: ex.working_point(*case, resolution=8), 5)
-    v, t_naive = _best_time(lambda: naive.working_point(*case, 64), 1)
+    # best of several timings for both (about 10 ms and 90 ms in all): one timing of ours
+    # fell into a burst of the shared host's load and gave 94x where the other runs gave
+    # 103-105x
+    r, t_ours = _best_time(lambda: ex.working_point(*case, resolution=8), 40)
+    v, t_naive = _best_time(lambda: naive.working_point(*case, 64), 3)
     return dict(ours_seconds=t_ours, ours_error=abs(r["simulated"] - ref) / ref,
                 naive_seconds=t_naive, naive_error=abs(v - ref) / ref, speedup=t_naive / t_ours)
 
