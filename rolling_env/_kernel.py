@@ -445,6 +445,18 @@ def _set_radius(W, st, p, a_new, d_new, mu):
 
 
 @njit(inline="always", **JIT)
+def _slide(Ut, Li, ie):
+    """A content Ut beyond its friction limit +-Li slides to it.  Returns (the clipped
+    content, the slip work Li (|Ut| - Li) / overlap, whether it slid); ``ie`` = 1 / overlap,
+    0 for a cell out of contact (no work: not inf * 0).  Branch-free (selects): the commit
+    loop in ``_commit`` vectorises with it."""
+    ex = abs(Ut) - Li
+    over = ex > 0.0
+    work = Li * ex * ie if (over & (ie > 0.0)) else 0.0
+    return (Li if Ut > Li else (-Li if Ut < -Li else Ut)), work, over
+
+
+@njit(inline="always", **JIT)
 def _clip_slope(Ut, Li, Bi):
     """Content clipped to the friction limit +-Li and its slope dU/ds (Bi stuck, 0 sliding)."""
     Uc = min(max(Ut, -Li), Li)  # branch-free; a NaN content still reaches the commit's check
@@ -586,7 +598,8 @@ def _stuck_length(W, i0, i1, j0, j1, x_lo, dx, c1, a):
     return stuck
 
 
-# Floating-point sums of the inner-cell loops may be reordered (reassoc), which lets LLVM
+# Floating-point sums of the cell loops (the inner cells; in the env's commit every cell of
+# the contact) may be reordered (reassoc), which lets LLVM
 # vectorise them (numba leaves the SLP vectoriser off, and the loop vectoriser keeps in-order
 # sums scalar): 1.4x per env-step on the default scene, and sums that differ from the in-order
 # ones at round-off level (relative 1e-15 to 1e-12 on trajectories).  Only these two flags: no
@@ -646,12 +659,9 @@ def _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass, edges):
                 ie = inv_dx if inner else im
         Ut = W[W_A, i] + Bi * s
         if mu is not None:
-            Li = W[W_L + L_LIMIT, i]
-            ex = abs(Ut) - Li
-            over = ex > 0.0
+            Ut, work, over = _slide(Ut, W[W_L + L_LIMIT, i], ie)
             clipped |= over
-            slip += Li * ex * ie if (over & (ie > 0.0)) else 0.0  # not inf * 0
-            Ut = Li if Ut > Li else (-Li if Ut < -Li else Ut)
+            slip += work
             if mass is not None:
                 Ta += abs(Ut)
         W[W_U, i] = Ut
@@ -716,9 +726,9 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
     (``_walk`` with the ledger, ``_walk_content`` without).  The commit takes every cell in
     one branch-free loop (``_commit``) in the env with friction; elsewhere (no friction, or the
     ledger) the inner cells take that loop and the edge cells a scalar one.  The loops' sums
-    may be reordered so that LLVM vectorises them.  With finite friction, B of the inner cells is written only before a
-    call of ``_solve_bracketed`` (the commit uses dx dt for them); elsewhere it holds stale
-    values.
+    may be reordered so that LLVM vectorises them.  B of the inner cells is never written
+    by the build pass (the commit uses dx dt for them): it holds stale values except just
+    before a call of ``_solve_bracketed`` (finite friction), which reads it.
     """
     U = W[W_U]
     A = W[W_A]
@@ -877,19 +887,21 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
             # loop (inner cells: B = dx dt and overlap dx; edge cells: the B and 1 / overlap
             # of the build pass); otherwise the inner cells, then the edge cells one by one
             # (with the ledger: their released energy)
+            edge_cells = _edges(i0, i1, j0, j1)
             if ledger is None and mu is not None:
                 T1, Ta, slip, clipped = _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass,
                                                 True)
-                e_hi = i0 - 1  # no edge cell left
+                edge_cells = _cells(0, 0)  # committed too: none left for the scalar loop
             else:
                 T1, Ta, slip, clipped = _commit(W, j0, j1, j0, j1, dxdt, s, inv_dx, mu, mass,
                                                 None)
-                e_hi = i1
-            for k in _edges(i0, e_hi, j0, j1):
+            for k in edge_cells:
                 i = _edge(k, j0, j1)
                 Ut = A[i] + B[i] * s
                 if mu is not None:
                     Li = L[0, i]
+                    # (the ledger test prunes this from the kernel without the ledger, where
+                    # _commit took the edge cells)
                     if ledger is not None and a > 0.0:
                         # the deflection an edge cell released this sub-step, from the creep
                         # integral, can be no larger than the friction limit allows (the
@@ -911,13 +923,9 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                                 Ln = muEG * _normal_content(xL, xL + dx, cn, a, d, inv3R)
                                 ei = min(ei, 0.5 * Ln * Ln / ln)
                         rel += ei
-                    # a cell beyond its limit slides to it (as in _commit)
-                    ex = abs(Ut) - Li
-                    over = ex > 0.0
+                    Ut, work, over = _slide(Ut, Li, L[L_INV_ELL, i])
                     clipped |= over
-                    inv_ell = L[L_INV_ELL, i]
-                    slip += Li * ex * inv_ell if (over and inv_ell > 0.0) else 0.0
-                    Ut = Li if Ut > Li else (-Li if Ut < -Li else Ut)
+                    slip += work
                     if mass is not None:
                         Ta += abs(Ut)
                 U[i] = Ut

@@ -250,6 +250,23 @@ def sb3_training_env(sizes=(1, 8, 256), ticks=2000):
     return rows
 
 
+_NAIVE_REPEATS = 40  # back-to-back timings of each kernel in the naive comparison (best counts)
+_NAIVE_ROUNDS = 10   # rounds of the two kernels called in turn (cold caches)
+
+
+def _best_interleaved(fns, rounds):
+    """Best time of each of ``fns`` called in turn, ``rounds`` rounds: each call follows the
+    other kernel's, which has evicted its code and data from the caches (a user who computes
+    one working point among other work sees this time, not the back-to-back one)."""
+    best = [math.inf] * len(fns)
+    for _ in range(rounds):
+        for k, fn in enumerate(fns):
+            t = time.perf_counter()
+            fn()
+            best[k] = min(best[k], time.perf_counter() - t)
+    return best
+
+
 def naive_equal_accuracy():
     """Working point (0.7, 0.1, 2.5): ours at 8 springs/a1 (worst-case error 6.6e-3 over grid
     alignments) vs the naive row at 64 springs/a1 (1.1e-2): ours is the more accurate."""
@@ -261,13 +278,22 @@ def naive_equal_accuracy():
         return None
     case = (0.7, 0.1, 2.5)
     ref = analytic.eq32(*case)
-    # best of several timings for both (about 10 ms and 90 ms in all): one timing of ours
-    # fell into a burst of the shared host's load and gave 94x where the other runs gave
-    # 103-105x
-    r, t_ours = _best_time(lambda: ex.working_point(*case, resolution=8), 40)
-    v, t_naive = _best_time(lambda: naive.working_point(*case, 64), 3)
+    def ours():
+        return ex.working_point(*case, resolution=8)
+
+    def plain():
+        return naive.working_point(*case, 64)
+
+    # the same number of back-to-back timings for both (best counts): with 5 of ours and 1
+    # of the naive row, the best of ours was 15-35% slower than the best of 40 on this
+    # shared host (a burst of load can cover a few 0.25 ms calls in a row)
+    r, t_ours = _best_time(ours, _NAIVE_REPEATS)
+    v, t_naive = _best_time(plain, _NAIVE_REPEATS)
+    c_ours, c_naive = _best_interleaved([ours, plain], _NAIVE_ROUNDS)
     return dict(ours_seconds=t_ours, ours_error=abs(r["simulated"] - ref) / ref,
-                naive_seconds=t_naive, naive_error=abs(v - ref) / ref, speedup=t_naive / t_ours)
+                naive_seconds=t_naive, naive_error=abs(v - ref) / ref, speedup=t_naive / t_ours,
+                ours_cold_seconds=c_ours, naive_cold_seconds=c_naive,
+                speedup_cold=c_naive / c_ours)
 
 
 _STARTUP = ("import time; t = time.perf_counter(); import gymnasium as gym, rolling_env; "
@@ -413,11 +439,18 @@ def report(res) -> str:
     n = res["naive"]
     if n:
         L += ["", "## Naive plain-numpy spring row at equal accuracy (working point 0.7, 0.1, 2.5)",
-              "", "| kernel | resolution | rel. error vs Eq. 32 | seconds | ", "|---|---|---|---|",
-              f"| ours | 8 springs/a1 | {n['ours_error']:.1e} | {n['ours_seconds']:.2e} |",
+              "", "| kernel | resolution | rel. error vs Eq. 32 | seconds, back to back | "
+              "seconds, after the other kernel |", "|---|---|---|---|---|",
+              f"| ours | 8 springs/a1 | {n['ours_error']:.1e} | {n['ours_seconds']:.2e} | "
+              f"{n['ours_cold_seconds']:.2e} |",
               f"| naive (tests/naive.py) | 64 springs/a1 | {n['naive_error']:.1e} | "
-              f"{n['naive_seconds']:.2e} |", "",
-              f"Speed-up at (better than) equal accuracy: {n['speedup']:.0f}x (target >= 100x)."]
+              f"{n['naive_seconds']:.2e} | {n['naive_cold_seconds']:.2e} |", "",
+              f"Speed-up at (better than) equal accuracy: {n['speedup']:.0f}x with each kernel "
+              f"called back to back (best of {_NAIVE_REPEATS} each; target >= 100x).  Each call "
+              f"right after the other kernel's (best of {_NAIVE_ROUNDS} rounds), when ours "
+              f"finds its code and data evicted from the caches: {n['speedup_cold']:.0f}x "
+              f"(a {n['ours_seconds'] * 1e3:.2f} ms call pays for the refill; the naive row's "
+              f"{n['naive_seconds'] * 1e3:.0f} ms hardly notice it)."]
     s = res["startup"]
     L += ["", "## Start-up and memory", "",
           f"- import + gym.make + first step, warm numba cache: {s['warm_seconds']:.2f} s "

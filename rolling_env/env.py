@@ -327,7 +327,8 @@ _INFO_KEYS = tuple(INFO_COLUMNS)
 # infos take them with one slice rather than a gather
 _INFO_LO = min(INFO_COLUMNS.values())
 _INFO_HI = _INFO_LO + len(INFO_COLUMNS)
-assert list(INFO_COLUMNS.values()) == list(range(_INFO_LO, _INFO_HI)), "X_* order changed"
+if list(INFO_COLUMNS.values()) != list(range(_INFO_LO, _INFO_HI)):  # not an assert: kept under -O
+    raise ImportError("rolling_env: INFO_COLUMNS must follow the order of _envkernel.X_*")
 
 
 def info_dict(x, target) -> dict:

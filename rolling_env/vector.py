@@ -234,7 +234,7 @@ class RollingDriveVectorEnv(_gym_vector_base()):
             masks[:] = mask
             for v in d.values():
                 v[~mask] = 0  # Gymnasium's fill for envs without info
-        d.update(zip(_MASK_KEYS, masks))
+        d.update(zip(_MASK_KEYS, masks, strict=True))
         return d
 
 

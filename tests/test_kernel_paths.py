@@ -96,6 +96,66 @@ def test_closed_form_edge_cell_below_the_rounding_step_stays_finite():
     assert K._walk_content(*args) == (0.0, 0.0) == K._walk(*args)[:2]
 
 
+def _commit_reference(W, i0, i1, j0, j1, dxdt, s, inv_dx, mass):
+    """Plain-Python commit of cells i0..i1 (finite friction): inner cells j0..j1 with B = dx dt
+    and overlap dx, edge cells with the build pass's B and 1 / overlap; a content beyond its
+    limit slides to it (slip work L (|U| - L) / overlap, none for a cell out of contact)."""
+    W = W.copy()
+    T1 = Ta = slip = 0.0
+    clipped = False
+    for i in range(i0, i1 + 1):
+        inner = j0 <= i <= j1
+        Bi = dxdt if inner else W[K.W_B, i]
+        ie = inv_dx if inner else W[K.W_L + K.L_INV_ELL, i]
+        Li = W[K.W_L + K.L_LIMIT, i]
+        Ut = W[K.W_A, i] + Bi * s
+        if abs(Ut) > Li:
+            clipped = True
+            if ie > 0.0:
+                slip += Li * (abs(Ut) - Li) * ie
+            Ut = math.copysign(Li, Ut)
+        W[K.W_U, i] = Ut
+        T1 += Ut
+        Ta += abs(Ut) if mass is not None else 0.0
+    return W, (T1, Ta, slip, clipped)
+
+
+@pytest.mark.parametrize("mass", [None, 0.0, 2.5])
+@pytest.mark.parametrize("i0, i1, j0, j1", [
+    (0, 11, 3, 8),    # edge cells on both sides, the contact at the row's first and last cell
+    (0, 11, 0, 11),   # inner cells only
+    (2, 9, 10, 9),    # no inner cell (j0 = i1 + 1): every cell an edge cell
+    (5, 5, 6, 5),     # a single edge cell
+    (0, -1, 0, -1),   # no cell (lift-off, or the contact off the row): nothing committed
+])
+def test_commit_of_every_cell_matches_a_plain_reference(i0, i1, j0, j1, mass):
+    """``_commit`` with ``edges=True`` (the env's one loop over inner and edge cells) against a
+    plain per-cell loop: contents exactly equal (the per-cell arithmetic is not reordered),
+    sums to 1e-13 (reassoc reorders them), cells outside i0..i1 untouched, clipping on both
+    signs and an edge cell out of contact (overlap 0: clipped to 0 with no slip work)."""
+    rng = np.random.default_rng(7)
+    n = 12
+    W = rng.normal(size=(K.work_rows(True), n))
+    W[K.W_L + K.L_LIMIT] = rng.uniform(0.0, 1.0, n)
+    W[K.W_L + K.L_INV_ELL] = rng.uniform(0.5, 4.0, n)
+    W[K.W_L + K.L_LIMIT, 1] = 0.0  # an edge cell that left the contact
+    W[K.W_L + K.L_INV_ELL, 1] = 0.0
+    W[K.W_A, 1] = 0.3
+    W[K.W_A, 5] = -3.0  # with B = 0.5: A + B s = -2.15, beyond its limit (<= 1): slides
+    W[K.W_B, 5] = 0.5
+    dxdt, s, inv_dx = 0.4, 1.7, 2.0
+    want_W, want = _commit_reference(W, i0, i1, j0, j1, dxdt, s, inv_dx, mass)
+    got = K._commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, 0.2, mass, True)
+    np.testing.assert_array_equal(W[K.W_U], want_W[K.W_U],
+                                  err_msg="committed contents differ from the plain loop")
+    np.testing.assert_array_equal(W[1:], want_W[1:], err_msg="commit changed a row it only reads")
+    assert got[3] == want[3], f"clipped flag {got[3]}, plain loop {want[3]}"
+    for name, g, w in zip(("T1", "Ta", "slip"), got[:3], want[:3]):
+        assert g == pytest.approx(w, rel=1e-13, abs=1e-300), f"{name} = {g}, plain loop {w}"
+    if i1 >= i0:
+        assert want[3], "the case must clip some cell (else the slip path goes untested)"
+
+
 def test_kernels_compile_without_reference_counting():
     """With the numba this project is tested against, the kernels are built without numba's
     reference counting (``_nrt=False``: 5% of the serial kernel, +12% for the threaded
