@@ -47,37 +47,56 @@ def core_hz() -> float:
     return CPU_HZ_FALLBACK
 
 
-def _steps_per_second(env, n, seed=0, repeats=3):
-    """Steps/s of a single env on pre-sampled actions, best of ``repeats`` runs of n steps."""
+ROUNDS = 3  # rounds of interleaved timed passes; each entry's best pass counts
+
+
+def _best_rates(passes: dict, rounds=ROUNDS) -> dict:
+    """Best rate of each named timed pass (a function that runs once and returns its rate),
+    the passes taken in turn for ``rounds`` rounds.  Interleaved so that the entries a ratio
+    compares see the same stretch of the shared host's load: timed one after the other, a
+    burst during one entry's passes skewed the ratio (a single env measured 35% slow gave the
+    batched env 13.9x instead of 8-9x in one run)."""
+    best = dict.fromkeys(passes, 0.0)
+    for _ in range(rounds):
+        for name, run_pass in passes.items():
+            best[name] = max(best[name], run_pass())
+    return best
+
+
+def _env_pass(env, n, seed=0):
+    """Timed pass of a single env: n steps of pre-sampled actions (resetting at episode
+    ends), after a warm-up; returns steps/s per call."""
     acts = np.random.default_rng(seed).uniform(-1, 1, (n, 3)).astype(np.float32)
     env.reset(seed=seed)
     for a in acts[: min(1000, n)]:
         env.step(a)
-    best = math.inf
-    for _ in range(repeats):
+
+    def run_pass():
         t = time.perf_counter()
         for a in acts:
             _, _, te, tr, _ = env.step(a)
             if te or tr:
                 env.reset()
-        best = min(best, time.perf_counter() - t)
-    return n / best
+        return n / (time.perf_counter() - t)
+    return run_pass
 
 
 def env_vs_pendulum(n=50_000, scenes=None):
     import gymnasium as gym
     import rolling_env
-    pend = _steps_per_second(gym.make("Pendulum-v1"), n)
-    rows = []
-    for sc in scenes or rolling_env.list_scenes():
-        r = _steps_per_second(gym.make("RollingDrive-v0", scene=sc), n)
-        rows.append(dict(scene=sc, steps_per_s=r, pendulum=pend, ratio=r / pend))
-    return rows
+    scenes = scenes or rolling_env.list_scenes()
+    passes = {"Pendulum-v1": _env_pass(gym.make("Pendulum-v1"), n)}
+    passes.update((sc, _env_pass(gym.make("RollingDrive-v0", scene=sc), n)) for sc in scenes)
+    r = _best_rates(passes)
+    pend = r["Pendulum-v1"]
+    return [dict(scene=sc, steps_per_s=r[sc], pendulum=pend, ratio=r[sc] / pend)
+            for sc in scenes]
 
 
-def _core_rate(core, ticks, seed=0, repeats=3):
-    """Env steps/s and cell updates/s of a BatchCore on random actions, best of ``repeats``
-    (the machine is shared; the best run is the least disturbed)."""
+def _core_pass(core, ticks, seed=0, threads=None):
+    """Timed pass of a BatchCore on random actions (truncated envs reset as they end), after a
+    warm-up; returns (env steps/s, cell updates/s) per call.  ``threads``: numba threads for
+    the pass (restored after it)."""
     acts = np.random.default_rng(seed).uniform(-1, 1, (ticks, core.num_envs, 3))
     sc = core.scene
     N = sc.N_min + 0.5 * (acts[..., 0] + 1) * (sc.N_max - sc.N_min)
@@ -87,30 +106,43 @@ def _core_rate(core, ticks, seed=0, repeats=3):
     core.reset()
     for a in acts[:20]:
         core.step(a)
-    best = math.inf
-    for _ in range(repeats):
-        t = time.perf_counter()
-        for a in acts:
-            core.step(a)
-            tr = core.steps >= core.max_episode_steps
-            if tr.any():
-                core.reset(tr)
-        best = min(best, time.perf_counter() - t)
-    return ticks * core.num_envs / best, cells * sc.sub_steps / best
+
+    def run_pass():
+        import numba
+        before = numba.get_num_threads()
+        numba.set_num_threads(threads or before)
+        try:
+            t = time.perf_counter()
+            for a in acts:
+                core.step(a)
+                tr = core.steps >= core.max_episode_steps
+                if tr.any():
+                    core.reset(tr)
+            dt = time.perf_counter() - t
+        finally:
+            numba.set_num_threads(before)
+        return ticks * core.num_envs / dt, cells * sc.sub_steps / dt
+    return run_pass
 
 
-def _vec_rate(env, n_envs, ticks, step, seed=0, repeats=3):
-    """Aggregate env steps/s of a vector env adapter (``step(actions)``), best of repeats."""
+def _steps(run_pass):
+    """The env steps/s of a ``_core_pass`` (for ``_best_rates``)."""
+    return lambda: run_pass()[0]
+
+
+def _vec_pass(step, n_envs, ticks, seed=0):
+    """Timed pass of a vector env adapter (``step(actions)``), after a warm-up; returns
+    aggregate env steps/s per call."""
     acts = np.random.default_rng(seed).uniform(-1, 1, (ticks, n_envs, 3)).astype(np.float32)
     for a in acts[:20]:
         step(a)
-    best = math.inf
-    for _ in range(repeats):
+
+    def run_pass():
         t = time.perf_counter()
         for a in acts:
             step(a)
-        best = min(best, time.perf_counter() - t)
-    return ticks * n_envs / best
+        return ticks * n_envs / (time.perf_counter() - t)
+    return run_pass
 
 
 def _limit(finite_mu: bool) -> float:
@@ -132,7 +164,8 @@ def kernel_throughput(ticks=20_000, scenes=None):
         core = BatchCore(64, scene=sc)
         limit = _limit(math.isfinite(core.scene.mu))
         core._step_fn = EK.env_step_serial
-        steps, cells = _core_rate(core, max(ticks // 64, 50))
+        run_pass = _core_pass(core, max(ticks // 64, 50))
+        steps, cells = max(run_pass() for _ in range(ROUNDS))
         rows.append(dict(scene=sc, cell_updates_per_s=cells, limit=limit, fraction=cells / limit,
                          env_steps_per_s=steps))
     return rows
@@ -180,52 +213,53 @@ def specialisation(ticks=300, scenes=None):
             full.cells = np.zeros((full.num_envs, K.work_rows(True), full.cells.shape[2]))
         for c in (spec, full):
             c._step_fn = __import__("rolling_env._envkernel", fromlist=["x"]).env_step_serial
-        r_spec, _ = _core_rate(spec, ticks)
-        r_full, _ = _core_rate(full, ticks)
+        r = _best_rates({"spec": _steps(_core_pass(spec, ticks)),
+                         "full": _steps(_core_pass(full, ticks))})
+        r_spec, r_full = r["spec"], r["full"]
         rows.append(dict(scene=sc, specialised=r_spec, all_features=r_full,
                          speedup=r_spec / r_full))
     return rows
 
 
-def batched(n_envs=256, ticks=200, single_rate=None, sizes=(1, 4, 16, 64, 256)):
+TOP_ROUNDS = 5  # rounds for the batched-vs-single table (the issue's headline ratio)
+
+
+def batched(n_envs=256, ticks=200, single_steps=20_000, sizes=(1, 4, 16, 64, 256)):
     """Aggregate steps/s of the batched core, serial and threaded kernel, over batch sizes
-    (where prange pays), and of the two adapters at ``n_envs``: Gymnasium's
-    ``gym.make_vec`` (NEXT_STEP autoreset) and the SB3 ``VecEnv`` (same-step)."""
+    (where prange pays), and at ``n_envs`` against the single env (``gym.make``, default
+    scene, ``single_steps`` per pass) measured in the same rounds: the threaded kernel on all
+    threads and on one, and the two adapters, Gymnasium's ``gym.make_vec`` (NEXT_STEP
+    autoreset) and the SB3 ``VecEnv`` (same-step)."""
     import gymnasium as gym
+    import numba
 
     from . import _envkernel as EK
     from .sb3_vec import RollingDriveVecEnv
     from .vector import BatchCore
-    sweep = []
-    for n in sizes:
-        row = dict(num_envs=n)
-        for name, fn in (("serial", EK.env_step_serial), ("threaded", EK.env_step_parallel)):
-            core = BatchCore(n)
-            core._step_fn = fn
-            row[name], _ = _core_rate(core, max(ticks, 20_000 // n))
-        sweep.append(row)
-    out = dict(sweep=sweep, single=single_rate, num_envs=n_envs)
-    top = next(r for r in sweep if r["num_envs"] == n_envs)
-    out["serial"], out["threaded"] = top["serial"], top["threaded"]
-    # the prange kernel on one thread: separates what the threads give from what the
-    # parallel kernel's different generated code gives
-    import numba
-    threads = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        core = BatchCore(n_envs)
-        core._step_fn = EK.env_step_parallel
-        out["threaded_1"], _ = _core_rate(core, ticks)
-    finally:
-        numba.set_num_threads(threads)
-    out["threads"] = threads
+
+    def core(n, fn, threads=None):
+        c = BatchCore(n)
+        c._step_fn = fn
+        return _steps(_core_pass(c, max(ticks, 20_000 // n), threads=threads))
+
+    sweep = [dict(num_envs=n, **_best_rates({"serial": core(n, EK.env_step_serial),
+                                             "threaded": core(n, EK.env_step_parallel)}))
+             for n in sizes]
     genv = gym.make_vec("RollingDrive-v0", num_envs=n_envs)
     genv.reset(seed=0)
-    out["gym_vector"] = _vec_rate(genv, n_envs, ticks, genv.step)
     venv = RollingDriveVecEnv(n_envs)
     venv.seed(0)
     venv.reset()
-    out["sb3_vecenv"] = _vec_rate(venv, n_envs, ticks, venv.step)
+    out = _best_rates({
+        "single": _env_pass(gym.make("RollingDrive-v0"), single_steps),
+        "serial": core(n_envs, EK.env_step_serial),
+        "threaded": core(n_envs, EK.env_step_parallel),
+        # the prange kernel on one thread: separates what the threads give from what the
+        # parallel kernel's different generated code gives
+        "threaded_1": core(n_envs, EK.env_step_parallel, threads=1),
+        "gym_vector": _vec_pass(genv.step, n_envs, ticks),
+        "sb3_vecenv": _vec_pass(venv.step, n_envs, ticks)}, TOP_ROUNDS)
+    out.update(sweep=sweep, num_envs=n_envs, threads=numba.get_num_threads())
     return out
 
 
@@ -238,15 +272,15 @@ def sb3_training_env(sizes=(1, 8, 256), ticks=2000):
     from .sb3_vec import RollingDriveVecEnv
     rows = []
     for n in sizes:
-        rates = {}
+        passes = {}
         for name, venv in (("batched", RollingDriveVecEnv(n)),
                            ("dummy", DummyVecEnv([lambda: rolling_env.make("default")
                                                   for _ in range(n)]))):
             venv = VecMonitor(venv)
             venv.seed(0)
             venv.reset()
-            rates[name] = _vec_rate(venv, n, max(ticks // n, 200), venv.step)
-        rows.append(dict(num_envs=n, **rates))
+            passes[name] = _vec_pass(venv.step, n, max(ticks // n, 200))
+        rows.append(dict(num_envs=n, **_best_rates(passes)))
     return rows
 
 
@@ -254,17 +288,13 @@ _NAIVE_REPEATS = 40  # back-to-back timings of each kernel in the naive comparis
 _NAIVE_ROUNDS = 10   # rounds of the two kernels called in turn (cold caches)
 
 
-def _best_interleaved(fns, rounds):
-    """Best time of each of ``fns`` called in turn, ``rounds`` rounds: each call follows the
-    other kernel's, which has evicted its code and data from the caches (a user who computes
-    one working point among other work sees this time, not the back-to-back one)."""
-    best = [math.inf] * len(fns)
-    for _ in range(rounds):
-        for k, fn in enumerate(fns):
-            t = time.perf_counter()
-            fn()
-            best[k] = min(best[k], time.perf_counter() - t)
-    return best
+def _timed(fn):
+    """A timed pass of one call of ``fn``: returns calls/s (for ``_best_rates``)."""
+    def run_pass():
+        t = time.perf_counter()
+        fn()
+        return 1.0 / (time.perf_counter() - t)
+    return run_pass
 
 
 def naive_equal_accuracy():
@@ -289,7 +319,10 @@ def naive_equal_accuracy():
     # shared host (a burst of load can cover a few 0.25 ms calls in a row)
     r, t_ours = _best_time(ours, _NAIVE_REPEATS)
     v, t_naive = _best_time(plain, _NAIVE_REPEATS)
-    c_ours, c_naive = _best_interleaved([ours, plain], _NAIVE_ROUNDS)
+    # each call right after the other kernel's, which has evicted its code and data from the
+    # caches (a user who computes one working point among other work sees this time)
+    cold = _best_rates({"ours": _timed(ours), "naive": _timed(plain)}, _NAIVE_ROUNDS)
+    c_ours, c_naive = 1.0 / cold["ours"], 1.0 / cold["naive"]
     return dict(ours_seconds=t_ours, ours_error=abs(r["simulated"] - ref) / ref,
                 naive_seconds=t_naive, naive_error=abs(v - ref) / ref, speedup=t_naive / t_ours,
                 ours_cold_seconds=c_ours, naive_cold_seconds=c_naive,
@@ -353,8 +386,8 @@ def run(quick=False) -> dict:
            "asymptotic": {"finite_mu": asymptotic_cell_rate(True),
                           "infinite_mu": asymptotic_cell_rate(False)},
            "specialisation": specialisation(50 if quick else 300, scenes)}
-    single = next(r["steps_per_s"] for r in res["env"] if r["scene"] == "default")
-    res["batched"] = batched(64 if quick else 256, 50 if quick else 200, single,
+    res["batched"] = batched(64 if quick else 256, 50 if quick else 200,
+                             10_000 if quick else 20_000,
                              (1, 64) if quick else (1, 2, 4, 16, 64, 256))
     res["sb3"] = sb3_training_env((1, 8) if quick else (1, 8, 256))
     res["naive"] = naive_equal_accuracy()
@@ -365,7 +398,10 @@ def run(quick=False) -> dict:
 def report(res) -> str:
     L = ["# Benchmarks", "",
          "Generated by `rolling-drive bench` on this project's 2-core CPU machine (no GPU); "
-         "every ratio compares numbers measured in the same run.", "",
+         "every ratio compares numbers measured in the same run, and the entries a ratio "
+         f"compares were timed in turn (best pass of {ROUNDS} interleaved rounds, "
+         f"{TOP_ROUNDS} for the batched-vs-single table), so that a burst of the shared "
+         "host's load hits them alike.", "",
          "## Single env through gym.make (pre-sampled actions) vs Pendulum-v1", "",
          "| scene | steps/s | Pendulum-v1 steps/s | ratio (target >= 0.3) |", "|---|---|---|---|"]
     L += [f"| {r['scene']} | {r['steps_per_s']:,.0f} | {r['pendulum']:,.0f} | {r['ratio']:.2f} |"

@@ -19,21 +19,26 @@ def check_range(name: str, value, lo: float, hi: float, *, lo_open: bool = False
         x = float(value)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a number, got {value!r}") from None
-    lb = "(" if lo_open else "["
-    rb = ")" if hi_open else "]"
-    rng = f"{lb}{_fmt(lo)}, {_fmt(hi)}{rb}"
-    if math.isinf(lo) and math.isinf(hi) and not allow_inf:
-        rng = "(-inf, inf) (a finite number)"
     if math.isnan(x):
-        raise ValueError(f"{name} must be in {rng}, got NaN")
+        raise ValueError(f"{name} must be in {_range(lo, hi, lo_open, hi_open, allow_inf)}, "
+                         "got NaN")
     if math.isinf(x) and x > 0 and allow_inf:
         return x
     bad = (x < lo or x > hi or (lo_open and x == lo) or (hi_open and x == hi)
            or (math.isinf(x) and not allow_inf))
     if bad:
         extra = " or inf" if allow_inf else ""
-        raise ValueError(f"{name} must be in {rng}{extra}, got {x!r}")
+        raise ValueError(f"{name} must be in {_range(lo, hi, lo_open, hi_open, allow_inf)}"
+                         f"{extra}, got {x!r}")
     return x
+
+
+def _range(lo, hi, lo_open, hi_open, allow_inf) -> str:
+    """The allowed range as the messages write it (built only for an error: formatting it for
+    every check was a sixth of a 0.25 ms working point's time)."""
+    if math.isinf(lo) and math.isinf(hi) and not allow_inf:
+        return "(-inf, inf) (a finite number)"
+    return f"{'(' if lo_open else '['}{_fmt(lo)}, {_fmt(hi)}{')' if hi_open else ']'}"
 
 
 def as_real_array(name: str, x) -> np.ndarray:
