@@ -599,9 +599,8 @@ def _stuck_length(W, i0, i1, j0, j1, x_lo, dx, c1, a):
 
 
 # Floating-point sums of the cell loops (the inner cells; in the env's commit every cell of
-# the contact) may be reordered (reassoc), which lets LLVM
-# vectorise them (numba leaves the SLP vectoriser off, and the loop vectoriser keeps in-order
-# sums scalar): 1.4x per env-step on the default scene, and sums that differ from the in-order
+# the contact) may be reordered (reassoc), which lets LLVM vectorise them (numba leaves the
+# SLP vectoriser off, and the loop vectoriser keeps in-order sums scalar): 1.4x per env-step on the default scene, and sums that differ from the in-order
 # ones at round-off level (relative 1e-15 to 1e-12 on trajectories).  Only these two flags: no
 # nnan/ninf (NaN and inf still reach the flag checks), no contract/arcp (the cell-bound tests
 # elsewhere rely on exact floating-point comparisons; they are not in these functions, which

@@ -143,6 +143,8 @@ def test_commit_of_every_cell_matches_a_plain_reference(i0, i1, j0, j1, mass):
     W[K.W_A, 1] = 0.3
     W[K.W_A, 5] = -3.0  # with B = 0.5: A + B s = -2.15, beyond its limit (<= 1): slides
     W[K.W_B, 5] = 0.5
+    W[K.W_A, 7] = 3.0  # inner (B = 0.4) or edge (B = 0.5): beyond its limit, positive side
+    W[K.W_B, 7] = 0.5
     dxdt, s, inv_dx = 0.4, 1.7, 2.0
     want_W, want = _commit_reference(W, i0, i1, j0, j1, dxdt, s, inv_dx, mass)
     got = K._commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, 0.2, mass, True)
@@ -152,8 +154,13 @@ def test_commit_of_every_cell_matches_a_plain_reference(i0, i1, j0, j1, mass):
     assert got[3] == want[3], f"clipped flag {got[3]}, plain loop {want[3]}"
     for name, g, w in zip(("T1", "Ta", "slip"), got[:3], want[:3]):
         assert g == pytest.approx(w, rel=1e-13, abs=1e-300), f"{name} = {g}, plain loop {w}"
-    if i1 >= i0:
-        assert want[3], "the case must clip some cell (else the slip path goes untested)"
+    U, L = want_W[K.W_U, i0:i1 + 1], want_W[K.W_L + K.L_LIMIT, i0:i1 + 1]
+    n_pos = int(np.sum((U == L) & (L > 0)))  # slid to +limit
+    n_neg = int(np.sum((U == -L) & (L > 0)))  # slid to -limit
+    if i1 >= i0:  # the case must exercise the slip path (else it could pass with it broken)
+        assert n_pos + n_neg > 0, "no cell of the case slid to its limit"
+    if i0 <= 5 <= i1 and i0 <= 7 <= i1:
+        assert n_pos > 0 and n_neg > 0, f"slid: {n_pos} positive, {n_neg} negative"
 
 
 def test_kernels_compile_without_reference_counting():
