@@ -18,7 +18,10 @@ from . import _kernel as K
 S_N_MIN, S_N_MAX, S_UMAX, S_CREEP, S_STROKE_R, S_STROKE_T, S_R, S_E = range(8)
 S_DT, S_L0, S_T0, S_F0, S_W0, S_TMAX, S_VREF, S_TREF, S_WREF = range(8, 17)
 S_WTRACK, S_WWEAR, S_TPP, S_EPISODE, S_NSUB = range(17, 22)
-N_SV = 22
+# derived constants (the tick multiplies by them instead of dividing per tick)
+S_HERTZ, S_TS, S_DTSUB, S_INV_L0, S_INV_TMAX, S_INV_VREF, S_INV_SR, S_INV_ST = range(22, 30)
+S_INV_NMAX, S_INV_TREF, S_INV_EPISODE, S_INV_WREF = range(30, 34)
+N_SV = 34
 # followed by the observation clock: sin and cos of 2 pi j / ticks_per_period at
 # sv[N_SV + 2 j] and sv[N_SV + 2 j + 1], j = 0 .. ticks_per_period - 1 (a table: the clock
 # repeats every period, and two transcendental calls per tick were 3% of the default step)
@@ -63,12 +66,11 @@ def _env_tick(e, act, sv, target, steps, W, st, p, out, obs, extra, mu, mass, lo
             _travel(ste[K.ST_XSPH] * L0, v * dt, sv[S_STROKE_T]))
     u *= f
     v *= f
-    cb = np.cbrt(3.0 * N / (4.0 * sv[S_E] * math.sqrt(sv[S_R])))  # Hertz: d = cb^2
+    cb = np.cbrt(N * sv[S_HERTZ])  # Hertz: d = cb^2
     d = cb * cb
-    ts = t0 / L0
-    n_sub = int(sv[S_NSUB])
-    K._tick(W[e], ste, p[e], d / L0, u * ts, v * ts, 0.0, mu, mass, load,
-            n_sub, dt / n_sub / t0, out[e], ledger)
+    ts = sv[S_TS]
+    K._tick(W[e], ste, p[e], d * sv[S_INV_L0], u * ts, v * ts, 0.0, mu, mass, load,
+            int(sv[S_NSUB]), sv[S_DTSUB], out[e], ledger)
     steps[e] += 1
     oe = out[e]
     xs = ste[K.ST_XS] * L0
@@ -80,21 +82,21 @@ def _env_tick(e, act, sv, target, steps, W, st, p, out, obs, extra, mu, mass, lo
     k = steps[e]
     j = N_SV + 2 * (k % int(sv[S_TPP]))
     ob = obs[e]
-    ob[0] = _clip(err / sv[S_TMAX])
-    ob[1] = _clip(vs / sv[S_VREF])
-    ob[2] = _clip(ste[K.ST_C] * L0 / sv[S_STROKE_R])
-    ob[3] = _clip(ste[K.ST_XSPH] * L0 / sv[S_STROKE_T])
-    ob[4] = _clip(Nn / sv[S_N_MAX])
-    ob[5] = _clip(T / sv[S_TREF])
+    ob[0] = _clip(err * sv[S_INV_TMAX])
+    ob[1] = _clip(vs * sv[S_INV_VREF])
+    ob[2] = _clip(ste[K.ST_C] * L0 * sv[S_INV_SR])
+    ob[3] = _clip(ste[K.ST_XSPH] * L0 * sv[S_INV_ST])
+    ob[4] = _clip(Nn * sv[S_INV_NMAX])
+    ob[5] = _clip(T * sv[S_INV_TREF])
     ob[6] = oe[K.OUT_STICK]
     ob[7] = sv[j]
     ob[8] = sv[j + 1]
-    ob[9] = _clip(k / sv[S_EPISODE])
+    ob[9] = _clip(k * sv[S_INV_EPISODE])
     ob[10] = a0
     ob[11] = a1
     ob[12] = a2
-    track = -sv[S_WTRACK] * abs(err) / sv[S_TMAX]
-    wear = -sv[S_WWEAR] * slip / sv[S_WREF]
+    track = -sv[S_WTRACK] * abs(err) * sv[S_INV_TMAX]
+    wear = -sv[S_WWEAR] * slip * sv[S_INV_WREF]
     x = extra[e]
     x[X_REWARD] = track + wear
     x[X_TRACK] = track
@@ -188,6 +190,10 @@ def scene_vector(scene, a_max: float, drive) -> np.ndarray:
         sc.dt, drive.L0, drive.t0, drive.F0, drive.W0, sc.target_max, v_ref, T_ref, wear_ref)
     sv[[S_WTRACK, S_WWEAR, S_TPP, S_EPISODE, S_NSUB]] = (
         sc.w_track, sc.w_wear, tpp, sc.episode_steps, sc.sub_steps)
+    sv[[S_HERTZ, S_TS, S_DTSUB]] = (3.0 / (4.0 * sc.E_star * math.sqrt(sc.R)),
+                                    drive.t0 / drive.L0, sc.dt / sc.sub_steps / drive.t0)
+    sv[S_INV_L0:N_SV] = 1.0 / sv[[S_L0, S_TMAX, S_VREF, S_STROKE_R, S_STROKE_T, S_N_MAX, S_TREF,
+                                   S_EPISODE, S_WREF]]
     return sv
 
 

@@ -406,7 +406,7 @@ def _set_radius(W, st, p, a_new, d_new, mu):
     # cells inside the new contact (and so the old) lose nothing: only the edge cells are cut
     # (with finite friction the inner ones may still snap to their lowered limits)
     if a_new > 0.0:
-        j0, j1 = _inner_range(i0, i1, c - a_new, c + a_new, x_lo, dx)
+        j0, j1 = _inner_range(i0, i1, c - a_new, c + a_new, x_lo, dx, 1.0 / dx)
     else:
         j0, j1 = i1 + 1, i1
     if mu is None:
@@ -550,16 +550,16 @@ def _converged(g, mass, vv, v0, dt, Ta, F):
 
 
 @njit(inline="always", **JIT)
-def _inner_range(i0, i1, full_lo, full_hi, x_lo, dx):
+def _inner_range(i0, i1, full_lo, full_hi, x_lo, dx, inv_dx):
     """Cells j0..j1 of i0..i1 that lie inside [full_lo, full_hi] (inside the contact during the
     whole sub-step), by the same floating-point test as the cell bounds; j1 = j0 - 1 when
     there is none, with i0 <= j0 <= i1 + 1 so that i0..j0-1 and j1+1..i1 are the edge cells."""
-    j0 = _index(np.ceil((full_lo - x_lo) / dx), i0, i1 + 1)
+    j0 = _index(np.ceil((full_lo - x_lo) * inv_dx), i0, i1 + 1)
     while j0 <= i1 and x_lo + j0 * dx < full_lo:
         j0 += 1
     while j0 > i0 and x_lo + (j0 - 1) * dx >= full_lo:
         j0 -= 1
-    j1 = _index(np.floor((full_hi - x_lo) / dx) - 1.0, j0 - 1, i1)
+    j1 = _index(np.floor((full_hi - x_lo) * inv_dx) - 1.0, j0 - 1, i1)
     while j1 >= j0 and x_lo + j1 * dx + dx > full_hi:
         j1 -= 1
     while j1 < i1 and x_lo + (j1 + 1) * dx + dx <= full_hi:
@@ -770,8 +770,8 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
         v0 = v1
         T0 = T1
         # cells touched: union of the contact at c0 and c1
-        f0 = np.floor((min(c0, c1) - a - x_lo) / dx)
-        f1 = np.floor((max(c0, c1) + a - x_lo) / dx)
+        f0 = np.floor((min(c0, c1) - a - x_lo) * inv_dx)
+        f1 = np.floor((max(c0, c1) + a - x_lo) * inv_dx)
         if not (f0 >= 0.0 and f1 <= n - 1.0):
             st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_GRID
         i0 = _index(f0, 0, n)
@@ -791,7 +791,7 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
         Tt0 = 0.0
         dT0 = 0.0
         if a > 0.0:
-            j0, j1 = _inner_range(i0, i1, full_lo, full_hi, x_lo, dx)
+            j0, j1 = _inner_range(i0, i1, full_lo, full_hi, x_lo, dx, inv_dx)
         else:
             j0 = i1 + 1
             j1 = i1
