@@ -166,7 +166,7 @@ def reset_obs(e, sv, target, obs):
     ob = obs[e]
     for i in range(N_OBS):
         ob[i] = 0.0
-    ob[0] = _clip(target[e] / sv[S_TMAX])
+    ob[0] = _clip(target[e] * sv[S_INV_TMAX])  # as in _env_tick
     ob[8] = 1.0  # cos(0)
 
 

@@ -183,11 +183,22 @@ def _inner_content(zl, zh, d, inv3R):
 
 
 @njit(inline="always", **JIT)
+def _cell_floor(x, x_lo, inv_dx):
+    """floor((x - x_lo) / dx), as a float, by multiplying with inv_dx = 1.0 / dx.  The one
+    expression for the cell holding a contact end: the sub-steps' touched cells and
+    ``_contact_range`` (load change, energy sums) take it with the same operands, so a cell
+    that a tick gave content to is one the load change cuts and the sums count (within an
+    ulp of a cell bound, a product and a quotient can round to different cells)."""
+    return np.floor((x - x_lo) * inv_dx)
+
+
+@njit(inline="always", **JIT)
 def _contact_range(c, a, x_lo, dx, n):
     """First and last cell touching the contact [c - a, c + a], clamped to the row (i0 in
     [0, n], i1 in [-1, n - 1]: an empty range for a contact beyond either end)."""
-    i0 = _index(np.floor((c - a - x_lo) / dx), 0, n)
-    i1 = _index(np.floor((c + a - x_lo) / dx), -1, n - 1)
+    inv_dx = 1.0 / dx
+    i0 = _index(_cell_floor(c - a, x_lo, inv_dx), 0, n)
+    i1 = _index(_cell_floor(c + a, x_lo, inv_dx), -1, n - 1)
     return i0, i1
 
 
@@ -770,8 +781,8 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
         v0 = v1
         T0 = T1
         # cells touched: union of the contact at c0 and c1
-        f0 = np.floor((min(c0, c1) - a - x_lo) * inv_dx)
-        f1 = np.floor((max(c0, c1) + a - x_lo) * inv_dx)
+        f0 = _cell_floor(min(c0, c1) - a, x_lo, inv_dx)  # as _contact_range at the end
+        f1 = _cell_floor(max(c0, c1) + a, x_lo, inv_dx)
         if not (f0 >= 0.0 and f1 <= n - 1.0):
             st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_GRID
         i0 = _index(f0, 0, n)

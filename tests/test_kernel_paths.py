@@ -248,6 +248,87 @@ def test_scene_vector_carries_one_period_of_the_clock():
     assert int(sv[EK.S_TPP]) == 5
 
 
+@pytest.mark.parametrize("resolution", [10.0, 12.0, 16.0, 37.3])
+@pytest.mark.parametrize("scene", ["default", "heavy_inf_friction"])
+def test_no_content_outside_the_contact(scene, resolution):
+    """After every tick each cell outside the contact holds exactly zero content (the cells
+    the load change and the energy sums see, ``_contact_range``): released and cut-off
+    material leaves nothing behind.  400 ticks of 32 envs, random actions (force, lift-off,
+    both rolling directions), resolutions with and without an exact 1/dx.  (Random contacts
+    do not land within an ulp of a cell bound; the test below puts them there.)"""
+    core = BatchCore(32, scene=scene, resolution=resolution)
+    core.seed(3)
+    core.reset()
+    rng = np.random.default_rng(11)
+    n = core.cells.shape[2]
+    dx, x_lo = core.p[0, K.P_DX], core.p[0, K.P_X_LO]
+    worst = 0.0
+    for t in range(400):
+        a = rng.uniform(-1, 1, (32, 3))
+        a[rng.random(32) < 0.1, 0] = -1.0  # lift-off where N_min = 0
+        core.step(a)
+        for e in range(32):
+            c, half = core.st[e, K.ST_C], core.st[e, K.ST_A]
+            U = core.cells[e, K.W_U]
+            i0, i1 = K._contact_range(c, half, x_lo, dx, n) if half > 0 else (n, -1)
+            outside = np.r_[U[:max(i0, 0)], U[i1 + 1:]]
+            worst = max(worst, float(np.max(np.abs(outside), initial=0.0)))
+            assert worst == 0.0, (f"tick {t}, env {e}: content {worst!r} outside the contact "
+                                  f"cells {i0}..{i1} (c = {c!r}, a = {half!r}, dx = {dx!r})")
+        if core.steps.max() >= core.max_episode_steps:
+            core.reset(core.steps >= core.max_episode_steps)
+
+
+def _ulp_contact_ends():
+    """(x_lo, dx, t) with a contact end t a few ulps from a cell bound x_lo + m dx where
+    (t - x_lo) times 1/dx and (t - x_lo) / dx round to different cells."""
+    cases = []
+    x_lo = -8.0
+    for dx in (1 / 10, 1 / 12, 1 / 24, 1 / 37.3, 0.3):
+        for m in range(1, 300):
+            for direction in (math.inf, -math.inf):
+                t = x_lo + m * dx
+                for _ in range(4):
+                    t = math.nextafter(t, direction)
+                    if math.floor((t - x_lo) * (1.0 / dx)) != math.floor((t - x_lo) / dx):
+                        cases.append((x_lo, dx, t))
+    return cases
+
+
+def test_cells_a_tick_touches_are_the_cells_of_the_contact_at_ulp_level():
+    """A contact whose leading end lies a few ulps past a cell bound, where rounding (t - x_lo)
+    / dx by a product and by a quotient picks different cells: one tick (no rolling, the
+    sphere translating, so every touched cell takes content in proportion to its overlap)
+    leaves content only inside ``_contact_range`` of the end state, which the next load
+    change cuts and the energy sums count.  Before both used ``_cell_floor``, the tick took
+    the product and ``_contact_range`` the quotient: a cell of overlap ~1e-16 took content
+    outside the range."""
+    cases = _ulp_contact_ends()
+    crossing = 0
+    for x_lo, dx, t in cases:
+        d, R = 0.25, 1.0
+        a = math.sqrt(R * d)  # as the kernel computes it
+        c = t - a
+        if c + a != t:
+            continue
+        n = int((t - x_lo) / dx) + 4
+        W = np.zeros((K.work_rows(False), n))
+        st = np.zeros(K.N_STATE)
+        st[K.ST_C], st[K.ST_A], st[K.ST_D] = c, a, d
+        p = np.array([R, 1.2, x_lo, dx])
+        out = np.zeros(K.N_OUT)
+        K._tick(W, st, p, d, 0.0, 0.1, 0.0, None, 1.0, None, 1, 0.01, out, None)
+        i0, i1 = K._contact_range(st[K.ST_C], st[K.ST_A], x_lo, dx, n)
+        U = W[K.W_U]
+        outside = np.r_[U[:i0], U[i1 + 1:]]
+        assert not np.any(outside), (f"x_lo = {x_lo!r}, dx = {dx!r}, contact end {t!r}: content "
+                                     f"{outside[outside != 0]!r} outside cells {i0}..{i1}")
+        q = math.floor((t - x_lo) / dx)
+        crossing += bool(U[q + 1] != 0.0) if q + 1 < n else 0
+    assert crossing >= 5, (f"only {crossing} of {len(cases)} cases put content in the cell the "
+                           "quotient would miss: the test no longer probes the ulp case")
+
+
 GOLDEN = Path(__file__).parent / "data" / "golden_3ab498b.npz"
 
 

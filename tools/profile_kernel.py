@@ -4,11 +4,11 @@
 
 Samples the serial batched kernel (``BatchCore`` with ``env_step_serial``, random actions)
 with ``perf record -e cpu-clock`` (a timer, so it works on VMs without hardware counters) and
-prints each compiled kernel's share of the samples that fall in compiled code, plus the
-kernel's time per env-step.  perf cannot name JIT code by itself: the workload compiles the
+prints each compiled kernel's share of the samples that fall in the kernels' compiled code
+(and in libm's ``cbrt``, which the env kernel calls), plus the kernel's time per env-step.  perf cannot name JIT code by itself: the workload compiles the
 kernels in-process (an empty, temporary numba cache, so numba keeps the object code), reads
 each function's address and size and writes them to ``/tmp/perf-PID.map``, the file perf
-reads for JIT code.  Inlined helpers count towards the kernel they are inlined into
+reads for JIT code (removed once the samples are read).  Inlined helpers count towards the kernel they are inlined into
 (``_tick`` holds the edge cells, the cell ranges and the Newton step).  Needs ``perf``
 (Debian: linux-perf) and ``nm`` (binutils).  A developer's tool: nothing in the package or
 the tests uses it.
@@ -68,8 +68,12 @@ def workload(scene: str, envs: int, seconds: float) -> None:
         core.step(a)
     with tempfile.TemporaryDirectory() as tmp:
         lines = _perf_map_lines(tmp)
-    with open(f"/tmp/perf-{os.getpid()}.map", "w") as f:
+    map_path = f"/tmp/perf-{os.getpid()}.map"
+    with open(map_path, "w") as f:
         f.write("\n".join(lines) + "\n")
+    if "PROFILE_KERNEL_MAP" in os.environ:  # tell the parent, which removes it
+        with open(os.environ["PROFILE_KERNEL_MAP"], "w") as f:
+            f.write(map_path)
     t0 = time.perf_counter()
     passes = 0
     while time.perf_counter() - t0 < seconds:
@@ -99,13 +103,31 @@ def main(argv=None) -> int:
         return 0
     with tempfile.TemporaryDirectory() as tmp:
         data = os.path.join(tmp, "perf.data")
-        env = dict(os.environ, NUMBA_CACHE_DIR=os.path.join(tmp, "numba"))
-        subprocess.run(["perf", "record", "-q", "-e", "cpu-clock", "-F", "5000", "-o", data,
-                        "--", sys.executable, __file__, "--workload", "--scene", args.scene,
-                        "--envs", str(args.envs), "--seconds", str(args.seconds)],
-                       env=env, check=True)
-        script = subprocess.run(["perf", "script", "-i", data, "-F", "ip,sym"],
-                                capture_output=True, text=True, check=True).stdout
+        map_note = os.path.join(tmp, "map_path")
+        env = dict(os.environ, NUMBA_CACHE_DIR=os.path.join(tmp, "numba"),
+                   PROFILE_KERNEL_MAP=map_note)
+        try:
+            rec = subprocess.Popen(["perf", "record", "-q", "-e", "cpu-clock", "-F", "5000",
+                                    "-o", data, "--", sys.executable, __file__, "--workload",
+                                    "--scene", args.scene, "--envs", str(args.envs),
+                                    "--seconds", str(args.seconds)], env=env)
+        except FileNotFoundError:
+            print("perf not found (Debian: apt install linux-perf)")
+            return 1
+        code = rec.wait()
+        try:
+            if code != 0:
+                print(f"perf record failed (exit {code}): is perf allowed here "
+                      "(/proc/sys/kernel/perf_event_paranoid)?")
+                return 1
+            script = subprocess.run(["perf", "script", "-i", data, "-F", "ip,sym"],
+                                    capture_output=True, text=True, check=True).stdout
+        finally:
+            if os.path.exists(map_note):  # the workload's perf map, once perf has read it
+                with open(map_note) as f:
+                    path = f.read().strip()
+                if path.startswith("/tmp/perf-") and os.path.exists(path):
+                    os.remove(path)
     counts = collections.Counter()
     for row in script.splitlines():
         sym = row.strip().partition(" ")[2]
@@ -113,7 +135,7 @@ def main(argv=None) -> int:
             counts[_short(sym)] += 1
     total = sum(counts.values())
     if not total:
-        print("no samples in the compiled kernels (is perf allowed here?)")
+        print("no samples in the compiled kernels (did the workload write its perf map?)")
         return 1
     print(f"{args.scene}, {args.envs} envs: share of {total} samples in compiled code")
     for name, n in counts.most_common():
