@@ -408,6 +408,7 @@ def _set_radius(W, st, p, a_new, d_new, mu):
     c = st[ST_C]
     x_lo = p[P_X_LO]
     dx = p[P_DX]
+    inv_dx = 1.0 / dx
     n = U.shape[0]
     i0, i1 = _contact_range(c, a_old, x_lo, dx, n)
     rel = 0.0
@@ -417,7 +418,7 @@ def _set_radius(W, st, p, a_new, d_new, mu):
     # cells inside the new contact (and so the old) lose nothing: only the edge cells are cut
     # (with finite friction the inner ones may still snap to their lowered limits)
     if a_new > 0.0:
-        j0, j1 = _inner_range(i0, i1, c - a_new, c + a_new, x_lo, dx, 1.0 / dx)
+        j0, j1 = _inner_range(i0, i1, c - a_new, c + a_new, x_lo, dx, inv_dx)
     else:
         j0, j1 = i1 + 1, i1
     if mu is None:
@@ -432,7 +433,7 @@ def _set_radius(W, st, p, a_new, d_new, mu):
     else:
         inv3R = 1.0 / (3.0 * p[P_R])
         muEG = mu * p[P_E_OVER_G]
-        T, slip, snap = _snap_inner(W, j0, j1, x_lo, dx, c, muEG, d_new, inv3R, 1.0 / dx)
+        T, slip, snap = _snap_inner(W, j0, j1, x_lo, dx, c, muEG, d_new, inv3R, inv_dx)
         for k in _edges(i0, i1, j0, j1):
             i = _edge(k, j0, j1)
             xL = x_lo + i * dx
@@ -611,8 +612,9 @@ def _stuck_length(W, i0, i1, j0, j1, x_lo, dx, c1, a):
 
 # Floating-point sums of the cell loops (the inner cells; in the env's commit every cell of
 # the contact) may be reordered (reassoc), which lets LLVM vectorise them (numba leaves the
-# SLP vectoriser off, and the loop vectoriser keeps in-order sums scalar): 1.4x per env-step on the default scene, and sums that differ from the in-order
-# ones at round-off level (relative 1e-15 to 1e-12 on trajectories).  Only these two flags: no
+# SLP vectoriser off, and the loop vectoriser keeps in-order sums scalar): 1.4x per env-step
+# on the default scene, and sums that differ from the in-order ones at round-off level
+# (relative 1e-15 to 1e-12 on trajectories).  Only these two flags: no
 # nnan/ninf (NaN and inf still reach the flag checks), no contract/arcp (the cell-bound tests
 # elsewhere rely on exact floating-point comparisons; they are not in these functions, which
 # numba compiles separately: inline="always" would drop their fastmath flags).

@@ -490,9 +490,8 @@ def report(res) -> str:
               f"Speed-up at (better than) equal accuracy: {n['speedup']:.0f}x with each kernel "
               f"called back to back (best of {_NAIVE_BURST * _NAIVE_ROUNDS} each, in "
               f"{_NAIVE_ROUNDS} rounds of {_NAIVE_BURST} calls taken in turn; target >= 100x).  "
-              "Each call "
-              f"right after the other kernel's (best of {_NAIVE_ROUNDS} rounds), when ours "
-              f"finds its code and data evicted from the caches: {n['speedup_cold']:.0f}x "
+              f"Each call right after the other kernel's (best of {_NAIVE_ROUNDS} rounds), when "
+              f"ours finds its code and data evicted from the caches: {n['speedup_cold']:.0f}x "
               f"(a {n['ours_seconds'] * 1e3:.2f} ms call pays for the refill; the naive row's "
               f"{n['naive_seconds'] * 1e3:.0f} ms hardly notice it)."]
     s = res["startup"]

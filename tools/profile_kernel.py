@@ -5,10 +5,11 @@
 Samples the serial batched kernel (``BatchCore`` with ``env_step_serial``, random actions)
 with ``perf record -e cpu-clock`` (a timer, so it works on VMs without hardware counters) and
 prints each compiled kernel's share of the samples that fall in the kernels' compiled code
-(and in libm's ``cbrt``, which the env kernel calls), plus the kernel's time per env-step.  perf cannot name JIT code by itself: the workload compiles the
-kernels in-process (an empty, temporary numba cache, so numba keeps the object code), reads
-each function's address and size and writes them to ``/tmp/perf-PID.map``, the file perf
-reads for JIT code (removed once the samples are read).  Inlined helpers count towards the kernel they are inlined into
+(and in libm's ``cbrt``, which the env kernel calls), plus the kernel's time per env-step.
+perf cannot name JIT code by itself: the workload compiles the kernels in-process (an empty,
+temporary numba cache, so numba keeps the object code), reads each function's address and
+size and writes them to ``/tmp/perf-PID.map``, the file perf reads for JIT code (removed once
+the samples are read).  Inlined helpers count towards the kernel they are inlined into
 (``_tick`` holds the edge cells, the cell ranges and the Newton step).  Needs ``perf``
 (Debian: linux-perf) and ``nm`` (binutils).  A developer's tool: nothing in the package or
 the tests uses it.
