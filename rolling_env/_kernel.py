@@ -461,8 +461,8 @@ def _slide(Ut, Li, ie):
     """A content Ut beyond its friction limit +-Li slides to it.  Returns (the clipped
     content, the slip work Li (|Ut| - Li) / overlap, whether it slid); ``ie`` = 1 / overlap,
     0 for a cell out of contact (no work: not inf * 0).  Branch-free (selects, and min/max
-    for the clip): the commit loop in ``_commit`` vectorises with it, and its scalar
-    remainder (the last 1-3 cells) has no branch to mispredict: written as nested
+    for the clip): the loops in ``_commit`` and ``_snap_inner`` vectorise with it, and their
+    scalar remainders (the last 1-3 cells) have no branch to mispredict: written as nested
     conditionals, the clip compiled to two branches there (2-3% of the env step with
     friction).  A NaN content stays NaN (numba's max and min return their first argument
     when it is NaN), so the non-finite check still sees it."""
@@ -709,10 +709,9 @@ def _snap_inner(W, j0, j1, x_lo, dx, c, muEG, d_new, inv3R, inv_dx):
         Li = muEG * (val if val > 0.0 else 0.0)
         Ui = W[W_U, i]
         ex = abs(Ui) - Li
-        over = ex > 0.0
-        slip += Li * ex * inv_dx if over else 0.0
+        Ui, work, over = _slide(Ui, Li, inv_dx)  # overlap dx
+        slip += work
         snap += 0.5 * ex * ex * inv_dx if over else 0.0
-        Ui = min(max(Ui, -Li), Li)  # as in _slide
         W[W_U, i] = Ui
         T += Ui
     return T, slip, snap
