@@ -270,7 +270,10 @@ def sample_target(scene: Scene, rng, given: float | None) -> float:
     if given is not None:
         return given
     mag = rng.uniform(scene.target_min, scene.target_max)
-    sign = rng.choice((-1.0, 1.0)) if scene.target_both_signs else 1.0
+    # the draw rng.choice((-1.0, 1.0)) makes, without its conversion of the tuple to an
+    # array (6.6 of the 9.5 us a batched env's reset took): the same generator state and
+    # targets (compared on 2000 seeds), 1.1 us
+    sign = (-1.0, 1.0)[rng.integers(0, 2)] if scene.target_both_signs else 1.0
     return float(sign * mag)
 
 

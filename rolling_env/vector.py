@@ -102,16 +102,17 @@ class BatchCore(CellViews):
     def reset(self, mask=None, options=None) -> None:
         """Reset the envs where ``mask`` is True (all when None).  ``options``: one dict for
         every env, or a sequence of num_envs dicts (or None), one per env."""
-        idx = range(self.num_envs) if mask is None else np.flatnonzero(mask)
+        idx = np.arange(self.num_envs) if mask is None else np.flatnonzero(mask)
         # every env's options checked before any env changes: a bad one resets nothing
         given = self.check_options(options, idx)
-        for i, g in zip(idx, given):
+        for i, g in zip(idx, given):  # each env draws from its own generator
             self.target[i] = sample_target(self.scene, self.rngs[i], g)
-            self.U[i] = 0.0
-            self.st[i] = 0.0
-            self.steps[i] = 0
-            self.extra[i] = 0.0
-            self.extra[i, EK.X_SAT] = 1.0
+        self.U[idx] = 0.0
+        self.st[idx] = 0.0
+        self.steps[idx] = 0
+        self.extra[idx] = 0.0
+        self.extra[idx, EK.X_SAT] = 1.0
+        for i in idx:
             EK.reset_obs(i, self.sv, self.target, self.obs)
 
     def check_options(self, options, idx=None) -> list:

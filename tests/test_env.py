@@ -499,3 +499,20 @@ def test_human_render_windows_are_per_env():
     envs[1].step(np.zeros(3, np.float32))
     envs[1].close()
     assert plt.get_fignums() == []
+
+
+def test_seeded_targets_are_those_of_rng_choice():
+    """Reproducibility: the targets a seed gives (and the generator state after them) are
+    those of the first implementation, which drew the sign with rng.choice((-1.0, 1.0));
+    sample_target draws the same integer without choice's conversion of the tuple."""
+    from rolling_env.env import sample_target
+    scene = load_scene("default")
+    assert scene.target_both_signs
+    for seed in range(300):
+        ours, ref = np.random.default_rng(seed), np.random.default_rng(seed)
+        for _ in range(4):
+            got = sample_target(scene, ours, None)
+            mag = ref.uniform(scene.target_min, scene.target_max)
+            want = float(ref.choice((-1.0, 1.0)) * mag)
+            assert got == want, f"seed {seed}: target {got!r}, rng.choice gives {want!r}"
+        assert ours.bit_generator.state == ref.bit_generator.state, f"seed {seed}: state differs"

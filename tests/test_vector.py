@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import rolling_env
-import rolling_env._envkernel
+import rolling_env._envkernel as EK
 from rolling_env.vector import BatchCore, RollingDriveVecEnv, RollingDriveVectorEnv
 
 N = 4
@@ -70,15 +70,27 @@ def test_reset_mask_resets_only_masked():
     core.reset()
     for _ in range(5):
         core.step(np.full((3, 3), 0.5))
-    before = core.st.copy()
+    names = ("st", "U", "extra", "obs", "target", "steps")
+    before = {k: getattr(core, k).copy() for k in names}
+    assert np.any(core.U[1] != 0.0) and np.any(core.extra[1] != 0.0), "nothing to reset"
     core.reset(np.array([False, True, False]))
-    assert np.array_equal(core.st[0], before[0]) and np.array_equal(core.st[2], before[2])
+    for k in names:  # the other envs keep every per-env array
+        for e in (0, 2):
+            assert np.array_equal(getattr(core, k)[e], before[k][e]), f"{k}[{e}] changed"
     assert np.all(core.st[1] == 0.0) and core.steps[1] == 0 and core.steps[0] == 5
+    assert np.all(core.U[1] == 0.0), "masked env kept tangential content"
+    sat = np.zeros(EK.N_X)
+    sat[EK.X_SAT] = 1.0
+    assert np.array_equal(core.extra[1], sat), core.extra[1]
+    expect = np.zeros(EK.N_OBS, dtype=np.float32)  # runner at rest, no contact, step 0
+    expect[0] = core.target[1] / core.scene.target_max
+    expect[8] = 1.0
+    assert np.array_equal(core.obs[1], expect), (core.obs[1], expect)
 
 
 def test_parallel_kernel_equals_serial():
     a, b = BatchCore(70), BatchCore(70)  # >= PARALLEL_MIN_ENVS: threaded kernel
-    assert a._step_fn is rolling_env._envkernel.env_step_parallel
+    assert a._step_fn is EK.env_step_parallel
     b._step_fn = rolling_env._envkernel.env_step_serial
     a.seed(1), b.seed(1)
     a.reset(), b.reset()
