@@ -62,7 +62,34 @@ def _finite(name, a):
     return _out(a)
 
 
+def _together(fn):
+    """The parameters of ``fn`` must broadcast together (numpy's rules): a ValueError naming
+    them and their shapes, instead of numpy's "operands could not be broadcast" from inside
+    the formula."""
+    import functools
+    import inspect
+    names = list(inspect.signature(fn).parameters)
+
+    @functools.wraps(fn)
+    def checked(*args, **kwargs):
+        shapes = {}
+        for name, value in [*zip(names, args), *kwargs.items()]:
+            try:
+                shapes[name] = np.shape(value)
+            except ValueError:  # ragged: the parameter's own check names it
+                continue
+        try:
+            np.broadcast_shapes(*shapes.values())
+        except ValueError:
+            given = ", ".join(f"{k} {v}" for k, v in shapes.items() if v != ())
+            raise ValueError(f"{fn.__name__}: the parameters must broadcast together (numpy's "
+                             f"rules), got shapes {given}") from None
+        return fn(*args, **kwargs)
+    return checked
+
+
 # ----------------------------------------------------------------------------- materials
+@_together
 def effective_moduli(E1, nu1, E2, nu2):
     """Eq. 1: (E_star, G_star) [Pa] of two elastic bodies, Young moduli E1, E2 > 0 [Pa] and
     Poisson ratios nu1, nu2 in [0, 0.5]:
@@ -84,6 +111,7 @@ def g_over_e(nu):
 
 
 # ----------------------------------------------------------------------------- Hertz
+@_together
 def hertz_indentation(N, R, E_star):
     """Eq. 2: indentation d [m] = (3 N / (4 E* sqrt(R)))^(2/3); N >= 0 [N], R > 0 [m],
     E_star > 0 [Pa]."""
@@ -94,6 +122,7 @@ def hertz_indentation(N, R, E_star):
     return _finite("the indentation d", d)
 
 
+@_together
 def hertz_force(d, R, E_star):
     """Normal force N [N] = 4/3 E* sqrt(R) d^(3/2); d >= 0 [m], R > 0 [m], E_star > 0 [Pa]."""
     d = _arr("d", d, 0)
@@ -103,16 +132,19 @@ def hertz_force(d, R, E_star):
     return _finite("the normal force N", N)
 
 
+@_together
 def contact_radius(d, R):
     """Eq. 3: contact radius a [m] = sqrt(R d); d >= 0 [m], R > 0 [m]."""
     return _out(np.sqrt(_pos("R", R) * _arr("d", d, 0)))
 
 
+@_together
 def tangential_stiffness(a, G_star):
     """Stiffness 2 a G* [N/m] of a stuck contact of radius a >= 0 [m], G_star > 0 [Pa]."""
     return _out(2 * _arr("a", a, 0) * _pos("G_star", G_star))
 
 
+@_together
 def natural_frequency(a1, G_star, m):
     """omega_n = sqrt(2 a1 G* / m) [rad/s] of a runner of mass m > 0 [kg] on the stuck
     contact of radius a1 [m]."""
@@ -121,23 +153,29 @@ def natural_frequency(a1, G_star, m):
 
 
 # ----------------------------------------------------------------------------- working points
+@_together
 def steady_forces(delta, eps, vstar_ratio, a1, G_star):
     """Eqs. 27-28: steady rolling forces [N] on the runner in the forth and back steps,
     T1 = 2 G* a1^2 (1 - eps - V),  T2 = 2 G* a2^2 (-1 + eps - V),  a2^2 = delta a1^2,
     with V = vstar_ratio = v*/(omega R), a1 >= 0 [m], G_star > 0 [Pa], delta in [0, 1]."""
     delta, eps = _arr("delta", delta, 0, 1), _arr("eps", eps)
     V = _arr("vstar_ratio", vstar_ratio)
-    scale = 2 * _pos("G_star", G_star) * _arr("a1", a1, 0) ** 2
-    return _out(scale * (1 - eps - V)), _out(scale * delta * (-1 + eps - V))
+    G_star, a1 = _pos("G_star", G_star), _arr("a1", a1, 0)
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is _finite's error
+        scale = 2 * G_star * a1 ** 2
+        T1, T2 = scale * (1 - eps - V), scale * delta * (-1 + eps - V)
+    return _finite("T1", T1), _finite("T2", T2)
 
 
+@_together
 def eq29(delta, eps):
     """Eq. 29 (= Eq. 11), steady rolling (large amplitude):
     v*/(omega R) = (1 - eps)(1 - delta)/(1 + delta); delta in [0, 1], eps finite."""
     delta, eps = _arr("delta", delta, 0, 1), _arr("eps", eps)
-    return _out((1 - eps) * (1 - delta) / (1 + delta))
+    return _finite("Eq. 29's v*/(omega R)", (1 - eps) * (1 - delta) / (1 + delta))
 
 
+@_together
 def impulse_coefficients(delta, w):
     """(P, Q) of the period impulse I = (1 - eps) P - V Q of the runner force, V = v*/(omega R),
     in units of G* a1^2 * (a1 / (omega R)) [N s]; delta in [0, 1], 1 + sqrt(delta) <= w <= W_MAX.
@@ -169,6 +207,7 @@ def impulse_coefficients(delta, w):
     return _out(P), _out(Q)
 
 
+@_together
 def eq32(delta, eps, w):
     """Eq. 32: working point v*/(omega R) with the transition between the steps,
     (1 - eps) [4/3 (1 - delta^1.5) - 2 w (1 - delta)] / [4/3 - 4 delta - 2 w (1 + delta)];
@@ -182,9 +221,10 @@ def eq32(delta, eps, w):
                          "1 + sqrt(delta) <= w < 2")
     num = 4 / 3 * (1 - delta ** 1.5) / w - 2 * (1 - delta)  # both over w: no overflow
     den = (4 / 3 - 4 * delta) / w - 2 * (1 + delta)
-    return _out((1 - eps) * num / den)
+    return _finite("Eq. 32's v*/(omega R)", (1 - eps) * num / den)
 
 
+@_together
 def working_point_ratio(delta, eps, w):
     """Working point v*/(omega R) = (1 - eps) P/Q (zero period impulse) for
     w >= 1 + sqrt(delta): equal to Eq. 32 for w >= 2, with the (2 - w)^3/6 correction of
@@ -193,7 +233,8 @@ def working_point_ratio(delta, eps, w):
     eps = _arr("eps", eps)
     P, Q = impulse_coefficients(delta, w)
     w = np.asarray(w, dtype=np.float64)
-    return _out((1 - eps) * (np.asarray(P) / w) / (np.asarray(Q) / w))
+    return _finite("the working point v*/(omega R)",
+                   (1 - eps) * (np.asarray(P) / w) / (np.asarray(Q) / w))
 
 
 def _cubic_root_b(r, w):
@@ -214,6 +255,7 @@ def _cubic_root_b(r, w):
     return b
 
 
+@_together
 def invert_eq32_delta(ratio, eps, w):
     """delta in [0, 1] with eq32(delta, eps, w) = ratio (= v*/(omega R)), solved exactly as a
     cubic in b = sqrt(delta) (see ``_cubic_root_b``); eps finite and != 1, w >= 2.  ``ratio``
@@ -233,6 +275,7 @@ def invert_eq32_delta(ratio, eps, w):
     return _out((b ** 2).reshape(rb.shape))
 
 
+@_together
 def invert_eq32_eps(ratio, delta, w):
     """eps with eq32(delta, eps, w) = ratio: eps = 1 - ratio / eq32(delta, 0, w);
     ratio finite, delta in [0, 1) (at delta = 1 every eps gives 0), w >= 2."""
@@ -240,10 +283,13 @@ def invert_eq32_eps(ratio, delta, w):
     base = np.asarray(eq32(delta, 0.0, w))
     if np.any(base == 0):
         raise ValueError("delta must be in [0, 1) (delta = 1 gives v* = 0 for every eps)")
-    return _out(1 - ratio / base)
+    with np.errstate(over="ignore"):  # an overflow is _finite's error
+        eps = 1 - ratio / base
+    return _finite("eps", eps)
 
 
 # ----------------------------------------------------------------------------- Cattaneo-Mindlin
+@_together
 def mindlin_ustar(mu, d, E_star, G_star):
     """Tangential displacement u* = mu E* d / G* [m] at which the whole contact slides;
     mu in (0, inf), d >= 0 [m], E_star, G_star > 0 [Pa]."""
@@ -251,6 +297,7 @@ def mindlin_ustar(mu, d, E_star, G_star):
     return _out(mu * _pos("E_star", E_star) * d / _pos("G_star", G_star))
 
 
+@_together
 def mindlin_force(u, mu, N, d, E_star, G_star):
     """Cattaneo-Mindlin tangential force [N] of a Hertz contact (normal force N >= 0 [N],
     indentation d [m]) displaced by u [m] without rolling:

@@ -10,6 +10,7 @@ import argparse
 import importlib
 import json
 import math
+import re
 import sys
 
 COMMAND_MODULES = ["physics", "figures", "converge", "stability", "bench", "rollout"]
@@ -100,7 +101,20 @@ def _jsonable(o):
     return str(o)
 
 
+# A token argparse may take as a negative number rather than an option: its own pattern
+# (-3, -0.5, -.5) misses an exponent and inf/nan, so "--target -3e-7" failed with "expected one
+# argument".  No option of ours looks like a number, so every such token is a value.
+_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$",
+                              re.IGNORECASE)
+
+
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # a private attribute of argparse (tests/test_cli.py checks that negative values in
+        # exponent form reach the commands, and that -inf gets the range message)
+        self._negative_number_matcher = _NEGATIVE_NUMBER
+
     def error(self, message):  # one line, exit code 2
         self.exit(2, f"{self.prog}: error: {message}\n")
 

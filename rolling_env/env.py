@@ -143,9 +143,12 @@ class RollingDriveEnv(gym.Env):
 
     def __getstate__(self):
         # pickle and deepcopy would turn the views into independent copies: the kernel would
-        # step them while reset() and render() use the drive's own arrays
+        # step them while reset() and render() use the drive's own arrays.  The figure and
+        # window are left behind too (an unpickled matplotlib figure has no drawing canvas):
+        # the copy draws its own at its first render()
         state = self.__dict__.copy()
         del state["_arrays"]
+        state["_render_state"] = {}
         return state
 
     def __setstate__(self, state):
@@ -175,7 +178,7 @@ class RollingDriveEnv(gym.Env):
         bad = EK.env_step_serial(self._act, self._sv, self._target, self._steps, W, st, p,
                                  self._out, self._obs, self._extra, *self._features)
         if bad:
-            raise_step_error(bad, a, (3,), st)
+            raise_step_error(bad, a, (3,), st, self.scene)
         x = self._extra[0]
         if self.render_mode is not None:  # the runner's path, for the rendered frame only
             self._history.append(x[EK.X_XS])
@@ -258,9 +261,11 @@ def target_option(scene: Scene, options) -> float | None:
     t = float(t)
     lim = OBS_BOUND * scene.target_max
     if not (math.isfinite(t) and abs(t) <= lim):
-        raise ValueError(f"options['target'] must be a finite displacement in [-{lim:g}, {lim:g}]"
-                         f" m (OBS_BOUND x the scene's target_max, where the error observation "
-                         f"saturates), got {t!r}")
+        # the bound at full precision: 10 x 5e-7 rounds to 4.9999999999999996e-06, and a
+        # shortened bound would read as if it admitted 5e-06
+        raise ValueError(f"options['target'] must be a finite displacement in [-{lim!r}, "
+                         f"{lim!r}] m (OBS_BOUND x the scene's target_max, where the error "
+                         f"observation saturates), got {t!r}")
     return t
 
 
@@ -297,14 +302,30 @@ def check_action_dtype(action) -> np.ndarray:
     return a
 
 
-def raise_step_error(bad: int, action, shape, st) -> None:
+def raise_step_error(bad: int, action, shape, st, scene: Scene | None = None) -> None:
     """Raise what a nonzero status of the env kernel stands for: -1 a bad action (nothing was
-    stepped), > 0 envs with a kernel error flag or a non-finite reward or velocity."""
+    stepped), > 0 envs with a kernel error flag or a non-finite reward or velocity (with
+    ``scene``, the error names the scene keys that can cause it)."""
     if bad < 0:
         check_actions(action, shape)  # raises with the reason
         raise ValueError("action must be finite and inside [-1, 1]")
-    check_flags(st)
-    raise FloatingPointError("non-finite state after a physics tick")
+    try:
+        check_flags(st)
+        raise FloatingPointError("non-finite state after a physics tick")
+    except FloatingPointError as e:
+        raise FloatingPointError(f"{e}{_overflow_hint(scene)}") from None
+
+
+def _overflow_hint(scene: Scene | None) -> str:
+    """What makes a legal scene overflow: a light runner under a load, free wherever the
+    contact does not hold it (lift-off, sliding), gains velocity at |F_ext| / runner_mass."""
+    if scene is None or scene.F_ext == 0.0 or not 0.0 < scene.runner_mass < math.inf:
+        return ""
+    acc = abs(scene.F_ext) / scene.runner_mass
+    return (f"; the likely cause in this scene: a runner of runner_mass = "
+            f"{scene.runner_mass:g} kg under F_ext = {scene.F_ext:g} N accelerates at "
+            f"{acc:.3g} m/s^2 wherever the contact does not hold it, and its velocity or "
+            "displacement leaves the floating-point range: raise runner_mass or lower |F_ext|")
 
 
 def check_actions(action, shape) -> np.ndarray:

@@ -154,13 +154,15 @@ def validate(scene: Scene) -> Scene:
     if not lo <= s.E_star / s.G_star <= hi:
         raise ValueError(f"scene keys 'E_star' and 'G_star' must have a ratio E_star/G_star in "
                          f"[{lo:g}, {hi:g}], got {s.E_star / s.G_star:.3g}")
-    if s.runner_mass == 0.0 and s.F_ext != 0.0 and not abs(s.F_ext) < s.mu * s.N_min:
+    # the least force the contact holds; no contact (N_min = 0) holds none, also with mu = inf
+    hold = s.mu * s.N_min if s.N_min > 0.0 else 0.0
+    if s.runner_mass == 0.0 and s.F_ext != 0.0 and not abs(s.F_ext) < hold:
         # a massless runner under load is in equilibrium only while the contact holds the load
         # (|F_ext| <= mu N); the env kernel does not report the sliding case (it would step on
         # with a meaningless velocity), so a scene must exclude it for every action: the least
         # force the contact can hold is mu N_min
         raise ValueError(f"scene key 'F_ext' must satisfy |F_ext| < mu N_min = "
-                         f"{s.mu * s.N_min:.6g} N when runner_mass is 0, got {s.F_ext:g} N (a "
+                         f"{hold:.6g} N when runner_mass is 0, got {s.F_ext:g} N (a "
                          "loaded massless runner has no force equilibrium once the contact "
                          "slides, and the env cannot report that case): give the runner a "
                          "mass > 0, raise N_min or mu, or lower |F_ext|")
@@ -231,11 +233,17 @@ def _read_yaml(path: Path):
     """The YAML document in ``path``; a syntax error or a duplicate key is a ValueError naming
     the file and the line."""
     try:
-        with open(path) as f:
+        with open(path, encoding="utf-8") as f:
             return yaml.load(f, Loader=_UniqueKeyLoader)
     except yaml.YAMLError as e:
         msg = " ".join(str(e).split())
         raise ValueError(f"scene file {str(path)!r} is not valid YAML: {msg}") from None
+    except UnicodeDecodeError as e:
+        raise ValueError(f"scene file {str(path)!r} is not UTF-8 text (byte {e.start}: "
+                         f"{e.reason})") from None
+    except OSError as e:  # a folder, no permission, ...
+        raise ValueError(f"scene file {str(path)!r} cannot be read: "
+                         f"{e.strerror or e.__class__.__name__}") from None
 
 
 def list_scenes() -> list[str]:

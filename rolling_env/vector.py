@@ -132,7 +132,7 @@ class BatchCore(CellViews):
         bad = self._step_fn(self.act, self.sv, self.target, self.steps, self.cells, self.st, self.p,
                             self.out, self.obs, self.extra, *self.features)
         if bad:
-            raise_step_error(bad, a, (self.num_envs, 3), self.st)
+            raise_step_error(bad, a, (self.num_envs, 3), self.st, self.scene)
         return self.obs.copy(), self.extra[:, EK.X_REWARD].copy(), \
             self.steps >= self.max_episode_steps
 
@@ -173,6 +173,8 @@ class RollingDriveVectorEnv(_gym_vector_base()):
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._autoreset = np.zeros(self.num_envs, dtype=bool)
+        self._not_reset = np.ones(self.num_envs, dtype=bool)  # never reset yet
+        self._any_not_reset = True
 
     def reset(self, *, seed=None, options=None):
         """Reset every env, or with ``options={"reset_mask": m}`` (a bool array, one entry per
@@ -198,6 +200,8 @@ class RollingDriveVectorEnv(_gym_vector_base()):
                 self.action_space.seed(int(seed))
         self.core.reset(mask, options)
         self._autoreset[slice(None) if mask is None else mask] = False
+        self._not_reset[slice(None) if mask is None else mask] = False
+        self._any_not_reset = bool(self._not_reset.any())
         return self.core.obs.copy(), self._infos(mask)
 
     def _reset_mask(self, m) -> np.ndarray:
@@ -208,6 +212,11 @@ class RollingDriveVectorEnv(_gym_vector_base()):
         return m.copy()
 
     def step(self, actions):
+        if self._any_not_reset:  # as gym.make's OrderEnforcing does for each env of "sync"
+            from gymnasium.error import ResetNeeded
+            raise ResetNeeded(f"Cannot call step() before reset(): env(s) "
+                              f"{np.flatnonzero(self._not_reset).tolist()[:10]} were never "
+                              "reset")
         actions = check_action_dtype(actions)  # range and finiteness are checked by core.step
         if actions.shape != (self.num_envs, 3):  # before np.where below could broadcast it
             check_actions(actions, (self.num_envs, 3))  # raises naming the shape

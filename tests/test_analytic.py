@@ -259,6 +259,9 @@ BAD = [
     (an.mindlin_ustar, (math.inf, 1e-7, 1e11, 9e10), "mu"),
     (an.mindlin_force, (1e-9, 0.0, 1.0, 1e-7, 1e11, 9e10), "mu"),
     (an.mindlin_force, (math.nan, 0.2, 1.0, 1e-7, 1e11, 9e10), "u"),
+    # finite input whose result leaves the float range: named, not returned as inf
+    (an.steady_forces, (0.5, 0.1, 0.1, 1e200, 1e200), "T1 overflows"),
+    (an.invert_eq32_eps, (1e308, 0.7, 2.5), "eps overflows"),
 ]
 
 
@@ -305,3 +308,22 @@ def test_delta_zero_gives_one_minus_eps_everywhere(eps, w):
         assert abs(an.eq32(0.0, eps, w) - (1 - eps)) < 1e-14
         if eps != 1:
             assert an.invert_eq32_delta(1 - eps, eps, w) < 1e-12
+
+
+@pytest.mark.parametrize("call", [
+    lambda: an.eq32([0.5, 0.6], [0.1, 0.2, 0.3], 3.0),
+    lambda: an.steady_forces(0.5, [0.1, 0.2], [0.0, 0.1, 0.2], 1e-5, 9e10),
+    lambda: an.mindlin_force(np.zeros(4), 0.2, np.ones(3), 1e-7, 1e11, 9e10),
+])
+def test_shapes_that_do_not_broadcast_are_named(call):
+    """numpy's "operands could not be broadcast" names no parameter: the error names the
+    function and the shapes of the parameters given as arrays."""
+    with pytest.raises(ValueError, match=r"the parameters must broadcast together .*got shapes "
+                                         r"\w+ \(\d,\), \w+ \(\d,\)$"):
+        call()
+
+
+def test_broadcasting_parameters_still_work():
+    got = an.eq32(np.array([[0.5], [0.7]]), np.array([0.1, 0.2, 0.3]), 2.5)
+    assert got.shape == (2, 3)
+    assert got[1, 0] == pytest.approx(an.eq32(0.7, 0.1, 2.5), rel=1e-15)

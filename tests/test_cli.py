@@ -124,3 +124,46 @@ def test_delta_zero_accepted_and_gives_one_minus_eps(eps, capsys):
     r = _json(capsys, "simulate", "--delta", "0", "--eps", str(eps), "--w", "2.5",
               "--omega-n-ratio", "0", "--periods", "4", "--json")
     assert abs(r["mean_v_star_over_omega_R"] - (1 - eps)) < 1e-9, r
+
+
+def test_rollout_files_are_named_by_the_scene_key_not_the_yaml_name(tmp_path, capsys):
+    """A copy of a shipped scene with other values keeps the shipped ``name:`` inside; its
+    rollout must not land on (and overwrite) the shipped scene's files."""
+    import yaml
+
+    from rolling_env.scenes import SCENE_DIR
+    shipped = yaml.safe_load((SCENE_DIR / "default.yaml").read_text())
+    custom = dict(shipped, mu=0.01)  # name stays "default"
+    (tmp_path / "sc").mkdir()
+    same_stem = tmp_path / "sc" / "default.yaml"
+    other_stem = tmp_path / "sc" / "slippery.yaml"
+    for p in (same_stem, other_stem):
+        p.write_text(yaml.safe_dump(custom))
+    out = tmp_path / "out"
+    names = []
+    for scene in ("default", str(same_stem), str(other_stem)):
+        r = _json(capsys, "rollout", "--scene", scene, "--controller", "zero", "--out", str(out),
+                  "--json")
+        names.append(json.loads(json.dumps(r))["csv"])
+    assert len(set(names)) == 3, f"rollouts share files: {names}"
+    assert names[0].endswith("default_zero_seed0.csv"), names[0]
+    assert "default-" in names[1] and names[2].endswith("slippery_zero_seed0.csv"), names
+    assert len(list(out.glob("*.csv"))) == 3, sorted(p.name for p in out.iterdir())
+
+
+def test_negative_values_in_exponent_form_are_values(capsys):
+    """argparse takes "-3e-7" for an option unless told otherwise ("expected one argument")."""
+    r = _json(capsys, "working-point", "--delta", "0.7", "--eps", "-5e-1", "--w", "2.5",
+              "--resolution", "16", "--json")
+    assert r["eq32"] == pytest.approx(analytic.eq32(0.7, -0.5, 2.5), rel=1e-15), r
+    with pytest.raises(SystemExit) as e:  # argparse's own exit, code 2
+        main(["working-point", "--delta", "0.7", "--eps", "-inf", "--w", "2.5"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "eps must be" in err and "expected one argument" not in err, err
+
+
+def test_negative_target_in_exponent_form_reaches_the_rollout(tmp_path, capsys):
+    r = _json(capsys, "rollout", "--controller", "zero", "--target", "-3e-7", "--out",
+              str(tmp_path), "--json")
+    assert r["target"] == -3e-7, r

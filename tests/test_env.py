@@ -104,6 +104,27 @@ def test_copied_env_resets_like_a_fresh_one(copier):
         assert clone.drive.xstar == i1["xstar"], "drive and kernel state out of step"
 
 
+@pytest.mark.parametrize("copier", ["pickle", "deepcopy"])
+def test_copy_of_a_rendered_env_renders_its_own_state(copier):
+    """The figure an env drew with stays behind (an unpickled figure cannot draw): the copy
+    draws its own, the same frame as the original's for the same state, and each then
+    follows its own state."""
+    import copy
+    env = gym.make("RollingDrive-v0", render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step(np.array([0.5, 0.5, 0.0], np.float32))
+    first = env.render()
+    clone = pickle.loads(pickle.dumps(env)) if copier == "pickle" else copy.deepcopy(env)
+    frame = clone.render()
+    assert frame.shape == first.shape and frame.dtype == np.uint8, (frame.shape, frame.dtype)
+    assert np.array_equal(frame, first), "same state, different frame"
+    for _ in range(20):
+        clone.step(np.array([1.0, 1.0, 1.0], np.float32))
+    assert not np.array_equal(clone.render(), env.render()), "the copy drew the original"
+    clone.close()
+    env.close()
+
+
 @pytest.mark.parametrize("scene", SCENES)
 def test_reward_is_exact_sum_of_terms(scene):
     env = gym.make("RollingDrive-v0", scene=scene)
@@ -443,7 +464,10 @@ def test_vanishing_runner_mass_tends_to_massless():
 
 
 @pytest.mark.parametrize("options,match", [
-    ({"target": 1e-3}, r"options\['target'\] must be a finite displacement in \[-5e-06, 5e-06\]"),
+    ({"target": 1e-3}, r"options\['target'\] must be a finite displacement in "
+                       r"\[-4.9999999999999996e-06, 4.9999999999999996e-06\]"),
+    # refused because 10 x 5e-7 rounds below 5e-6: the message shows the bound that refuses it
+    ({"target": 5e-6}, r"in \[-4.9999999999999996e-06, 4.9999999999999996e-06\] m .*got 5e-06"),
     ({"target": True}, r"options\['target'\] must be a number"),
     ({"target": float("nan")}, "finite displacement"),
     ({"targte": 1e-7}, r"unknown key\(s\) \['targte'\]"),
@@ -516,3 +540,31 @@ def test_seeded_targets_are_those_of_rng_choice():
             want = float(ref.choice((-1.0, 1.0)) * mag)
             assert got == want, f"seed {seed}: target {got!r}, rng.choice gives {want!r}"
         assert ours.bit_generator.state == ref.bit_generator.state, f"seed {seed}: state differs"
+
+
+def test_unreadable_scene_files_are_value_errors_naming_the_file(tmp_path):
+    binary = tmp_path / "binary.yaml"
+    binary.write_bytes(b"\xff\xfe\x00name: x\n")
+    with pytest.raises(ValueError, match=r"binary.yaml' is not UTF-8 text"):
+        load_scene(binary)
+    folder = tmp_path / "folder.yaml"
+    folder.mkdir()
+    with pytest.raises(ValueError, match=r"folder.yaml' cannot be read"):
+        load_scene(folder)
+
+
+def test_overflow_of_a_light_loaded_runner_names_the_scene_keys():
+    """A legal but absurd scene (a 1e-295 kg runner under 1e6 N, free while the contact
+    lifts off) overflows on its first step: the error says which keys make it do so, in the
+    single and the batched env."""
+    from rolling_env.vector import BatchCore
+    kw = dict(runner_mass=1e-295, F_ext=1e6, period=1e3, ticks_per_period=2)
+    env = gym.make("RollingDrive-v0", **kw)
+    env.reset(seed=0)
+    with pytest.raises(FloatingPointError, match=r"runner_mass = 1e-295 kg under F_ext = 1e\+06"):
+        env.step(np.zeros(3, np.float32))
+    core = BatchCore(2, **kw)
+    core.seed(0)
+    core.reset()
+    with pytest.raises(FloatingPointError, match=r"raise runner_mass or lower \|F_ext\|"):
+        core.step(np.zeros((2, 3)))

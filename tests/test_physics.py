@@ -499,9 +499,11 @@ def test_scene_massless_runner_load_only_where_the_contact_holds_it():
     from rolling_env.scenes import load_scene
     sc = load_scene("default", runner_mass=0.0, N_min=0.2, F_ext=0.9 * 0.2 * 0.2, mu=0.2)
     assert sc.runner_mass == 0.0 and sc.F_ext == pytest.approx(0.036, rel=1e-12)
-    for kw in (dict(N_min=0.2, F_ext=0.05, mu=0.2), dict(N_min=0.0, F_ext=1e-6, mu=math.inf)):
-        with pytest.raises(ValueError, match=r"'F_ext' must satisfy \|F_ext\| < mu N_min"):
+    for kw, held in ((dict(N_min=0.2, F_ext=0.05, mu=0.2), "0.04 N"),
+                     (dict(N_min=0.0, F_ext=1e-6, mu=math.inf), "= 0 N")):
+        with pytest.raises(ValueError, match=r"'F_ext' must satisfy \|F_ext\| < mu N_min") as e:
             load_scene("default", runner_mass=0.0, **kw)
+        assert held in str(e.value) and "nan" not in str(e.value), str(e.value)
 
 
 # ----------------------------------------------------------------------------- delta = 0

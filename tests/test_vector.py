@@ -419,3 +419,23 @@ def test_make_vec_needs_neither_sb3_nor_torch():
     lines = out.stdout.split("\n")
     assert lines[0] == "[]", f"gym.make_vec imported {lines[0]}"
     assert lines[1] == "rolling_env.sb3_vec", f"lazy re-export gave {lines[1]!r}"
+
+
+def test_gymnasium_vector_env_needs_a_reset_before_step_like_sync():
+    """As "sync" (gym.make's OrderEnforcing in each env): stepping an env that was never
+    reset raises ResetNeeded, also after a masked first reset that left some envs out."""
+    from gymnasium.error import ResetNeeded
+    acts = np.zeros((3, 3), np.float32)
+    for mode in ("sync", None):
+        kw = {"vectorization_mode": mode} if mode else {}
+        env = gym.make_vec("RollingDrive-v0", num_envs=3, **kw)
+        with pytest.raises(ResetNeeded):
+            env.step(acts)
+        env.close()
+    env = gym.make_vec("RollingDrive-v0", num_envs=3)
+    env.reset(seed=0, options={"reset_mask": np.array([True, False, True])})
+    with pytest.raises(ResetNeeded, match=r"\[1\]"):
+        env.step(acts)
+    env.reset(seed=0, options={"reset_mask": np.array([False, True, False])})
+    obs, *_ = env.step(acts)  # every env has been reset once now
+    assert obs.shape == (3, EK.N_OBS)

@@ -37,11 +37,15 @@ def _run(args):
         raise ValueError(str(e).replace("options['target']", "--target")) from None
     ctrl = make_controller(args.controller, env, seed=args.seed, scene=args.scene)
     data = rollout(env, ctrl, seed=args.seed, target=args.target)
-    stem = f"{env.unwrapped.scene.name}_{controller_label(args.controller)}_seed{args.seed}"
+    # files named by the scene's key (agents' run folders and tables use it too), not by the
+    # name inside the YAML: a copy of default.yaml with other values keeps "name: default"
+    # and would overwrite the shipped scene's rollout
+    from agents.common import scene_key
+    key = scene_key(args.scene)
+    stem = f"{key}_{controller_label(args.controller)}_seed{args.seed}"
     out = Path(args.out)
     csv_path = write_csv(data, out / f"{stem}.csv")
-    png_path = plot(data, out / f"{stem}.png",
-                    title=f"{env.unwrapped.scene.name}: {args.controller}")
+    png_path = plot(data, out / f"{stem}.png", title=f"{key}: {args.controller}")
     res = {"csv": str(csv_path), "png": str(png_path), "return": data["return"],
            "final_error": data["final_error"], "target": float(data["target"][-1]),
            "slip_work": data["total_slip_work"], "steps": int(data["step"][-1])}
