@@ -327,3 +327,19 @@ def test_broadcasting_parameters_still_work():
     got = an.eq32(np.array([[0.5], [0.7]]), np.array([0.1, 0.2, 0.3]), 2.5)
     assert got.shape == (2, 3)
     assert got[1, 0] == pytest.approx(an.eq32(0.7, 0.1, 2.5), rel=1e-15)
+
+
+@pytest.mark.parametrize("as_type", [float, int, np.float64, np.float32, np.int64, np.asarray])
+def test_scalar_types_give_the_array_result(as_type):
+    """Scalar calls skip the broadcast check (a fast path for the common case): every scalar
+    type, and a 0-d array, gives the value of the 1-element array call to 1e-15 as a float;
+    out-of-range scalars still raise naming the parameter."""
+    args = (as_type(0), as_type(1), as_type(3))  # delta = 0, eps = 1 (no creep), w = 3
+    want = float(an.eq32(np.array([0.0]), np.array([1.0]), np.array([3.0]))[0])
+    got = an.eq32(*args)
+    assert type(got) is float, f"eq32 of {as_type.__name__} scalars returned {type(got)}"
+    assert abs(got - want) <= 1e-15, f"eq32 of {as_type.__name__} scalars: {got} vs {want}"
+    got = an.hertz_force(as_type(1), as_type(4), as_type(3))  # 4/3 E* sqrt(R) d^1.5 = 8
+    assert type(got) is float and abs(got - 8.0) <= 8e-15, f"hertz_force: {got!r}, not 8"
+    with pytest.raises(ValueError, match=r"^w must be finite and in \(0, 1e\+15\]"):
+        an.eq32(as_type(0), as_type(1), as_type(-3))
