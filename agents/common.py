@@ -412,7 +412,7 @@ def scene_key(scene) -> str:
     cannot be read keeps its stem (loading it reports the error)."""
     import rolling_env.scenes as scenes
     p = Path(scene)
-    if p.suffix not in (".yaml", ".yml"):
+    if p.suffix.lower() not in (".yaml", ".yml"):
         return str(scene)
     stem = p.stem
     if stem in scenes.list_scenes():

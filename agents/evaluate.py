@@ -2,13 +2,17 @@
 
     python -m agents.evaluate --scenes default resonant ... --runs runs/ --episodes 20
 
+    python -m agents.evaluate --baselines-only --scenes default   # no trained agents needed
+
 Controllers: the two Eq. 32 baselines and every trained agent under ``<runs>/<scene key>/*/``
 (``common.scene_key``; each run checked to be trained on the scene's content, ``check_run_scene``)
 (``agent_files``: EvalCallback's best model when its VecNormalize statistics were saved with
 it, else the final model, else the checkpoint, with the statistics saved beside it; a model
 whose statistics were saved at another step is skipped with a warning for the next one).  Writes ``results/comparison.md`` and ``results/comparison.csv``
 (atomically) and plots under ``results/plots/``: learning curves per scene and one trajectory
-per controller on the same target.
+per controller on the same target.  Without ``--baselines-only`` a missing ``--runs`` folder,
+or a scene without a trained agent there, is a usage error before anything is written (a
+mistyped ``--runs`` replaced the committed table with a baselines-only one).
 """
 from __future__ import annotations
 
@@ -26,7 +30,7 @@ import rolling_env
 from rolling_env.rollout import rollout
 
 from .baselines import Eq32Design, Eq32Feedback, Eq32OpenLoop
-from .common import SAVED_AT, atomic_write, buildable_scene
+from .common import SAVED_AT, atomic_write, buildable_scene, scene_key
 
 EVAL_SEED = 20261122  # held out: training uses seeds < 1e6, evaluation envs seed + 10000
 
@@ -163,7 +167,7 @@ def episode_metrics(data: dict, tol: float) -> dict:
 
 def _stem(scene) -> str:
     p = Path(str(scene))
-    return p.stem if p.suffix in (".yaml", ".yml") else str(scene)
+    return p.stem if p.suffix.lower() in (".yaml", ".yml") else str(scene)
 
 
 def check_run_scene(run: Path, scene, by_key: bool = True) -> None:
@@ -208,15 +212,17 @@ def check_run_scene(run: Path, scene, by_key: bool = True) -> None:
                          "comparable")
 
 
-def scene_runs(scene: str, runs: Path) -> list[Path]:
+def scene_runs(scene: str, runs: Path | None) -> list[Path]:
     """The run folders of a scene: ``<runs>/<scene key>/*/`` (the training script's layout;
-    the key of a scene file is its stem)."""
-    from .common import scene_key
+    the key of a scene file is its stem); none when ``runs`` is None (baselines only)."""
+    if runs is None:
+        return []
     return sorted(p for p in (runs / scene_key(scene)).glob("*") if p.is_dir())
 
 
-def controllers_for(scene: str, runs: Path, env) -> dict:
-    """The two baselines and every run's agent (each run checked to be trained on ``scene``)."""
+def controllers_for(scene: str, runs: Path | None, env) -> dict:
+    """The two baselines and every run's agent (each run checked to be trained on ``scene``);
+    ``runs`` None: the baselines alone."""
     ctrls = {"eq32-open-loop": Eq32OpenLoop.from_env(env),
              "eq32-feedback": Eq32Feedback.from_env(env)}
     for run in scene_runs(scene, runs):
@@ -245,7 +251,6 @@ def evaluate_scene(scene: str, runs: Path, episodes: int, env=None,
     """Every controller on the scene's held-out targets (episode i: target i, seed
     EVAL_SEED + i).  Returns one row per controller and the trajectory of target 0 of each.
     ``env`` and ``ctrls`` (from ``controllers_for``) are built here when not given."""
-    from .common import scene_key
     env = env if env is not None else rolling_env.make(scene)
     ctrls = ctrls if ctrls is not None else controllers_for(scene, runs, env)
     tol = env.unwrapped.scene.tolerance
@@ -408,7 +413,6 @@ def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path) -> Path:
     if ax[2].lines:
         ax[2].legend(fontsize=7)
     fig.tight_layout()
-    from .common import scene_key
     path = atomic_write(out / "plots" / f"{scene_key(scene)}.png",
                         lambda p: fig.savefig(p, dpi=80, format="png"))
     plt.close(fig)
@@ -422,6 +426,9 @@ def main(argv=None):
     p.add_argument("--runs", default="runs", help="folder of training runs (<runs>/<scene>/<run>/)")
     p.add_argument("--episodes", type=int, default=20, help="held-out targets per scene")
     p.add_argument("--out", default="results")
+    p.add_argument("--baselines-only", action="store_true",
+                   help="compare the two Eq. 32 baselines alone (no --runs needed); without it "
+                        "every scene must have a trained agent under <runs>/<scene key>/")
     args = p.parse_args(argv)
     if args.episodes < 1:
         p.error(f"--episodes must be >= 1, got {args.episodes}")
@@ -430,7 +437,11 @@ def main(argv=None):
             Eq32Design(buildable_scene(scene))
         except ValueError as e:
             p.error(f"--scenes: {e}")
-    out, runs = Path(args.out), Path(args.runs)
+    out, runs = Path(args.out), (None if args.baselines_only else Path(args.runs))
+    if runs is not None and not runs.is_dir():  # a mistyped --runs would replace the
+        # committed table with a baselines-only one
+        p.error(f"--runs: no folder {str(runs)!r} (train agents first, see README, or pass "
+                "--baselines-only to compare the Eq. 32 baselines alone)")
     try:  # the output folder must take files, before any evaluation work
         out.mkdir(parents=True, exist_ok=True)
         probe = tempfile.NamedTemporaryFile(dir=out, prefix=".probe.")
@@ -444,6 +455,10 @@ def main(argv=None):
             setups.append((scene, env, controllers_for(scene, runs, env)))
         except (ValueError, OSError, KeyError) as e:
             p.error(f"--runs: {e}")
+        if runs is not None and len(setups[-1][2]) == 2:  # the two baselines only
+            p.error(f"--runs: no trained agent for scene {scene!r} under "
+                    f"{str(runs / scene_key(scene))!r} (train one, leave the scene out of "
+                    "--scenes, or pass --baselines-only)")
     rows, plots = [], []
     for scene, env, ctrls in setups:
         r, traj = evaluate_scene(scene, runs, args.episodes, env, ctrls)
@@ -453,9 +468,11 @@ def main(argv=None):
             print(f"{row['scene']:20s} {row['controller']:16s} final|e|/tol "
                   f"{row['final_abs_error_mean'] / row['tolerance']:8.2f}  reached "
                   f"{row['reached_fraction']:.2f}  slip {row['slip_work_mean']:.3e} J", flush=True)
-    for scene, traj in plots:  # written only once every scene has been evaluated
-        plot_scene(scene, runs, traj, out)
-    write_tables(rows, out, args.episodes)
+    from rolling_env.io import staged
+    with staged():  # written only once every scene has been evaluated, and all or none
+        for scene, traj in plots:
+            plot_scene(scene, runs, traj, out)
+        write_tables(rows, out, args.episodes)
     return 0
 
 

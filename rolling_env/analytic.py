@@ -69,6 +69,15 @@ def _finite(name, a):
     return _out(a)
 
 
+def _finite_pos(name, a):
+    """A result that must be positive and finite: overflow to inf or underflow to 0 for
+    input in range is a ValueError naming it."""
+    if not np.all(np.isfinite(a) & (np.asarray(a) > 0)):
+        raise ValueError(f"{name} leaves the float range for this input (inputs too large or "
+                         "too small)")
+    return _out(a)
+
+
 # scalars that always broadcast: _together skips its shape check for calls made of them only
 _SCALAR_TYPES = (float, int, np.float64)
 
@@ -110,10 +119,11 @@ def effective_moduli(E1, nu1, E2, nu2):
     G_i = E_i / (2 (1 + nu_i))."""
     E1, E2 = _pos("E1", E1), _pos("E2", E2)
     nu1, nu2 = _arr("nu1", nu1, 0, 0.5), _arr("nu2", nu2, 0, 0.5)
-    G1, G2 = E1 / (2 * (1 + nu1)), E2 / (2 * (1 + nu2))
-    E_star = 1 / ((1 - nu1 ** 2) / E1 + (1 - nu2 ** 2) / E2)
-    G_star = 1 / ((2 - nu1) / (4 * G1) + (2 - nu2) / (4 * G2))
-    return _out(E_star), _out(G_star)
+    with np.errstate(over="ignore", divide="ignore"):
+        G1, G2 = E1 / (2 * (1 + nu1)), E2 / (2 * (1 + nu2))
+        E_star = 1 / ((1 - nu1 ** 2) / E1 + (1 - nu2 ** 2) / E2)
+        G_star = 1 / ((2 - nu1) / (4 * G1) + (2 - nu2) / (4 * G2))
+    return _finite_pos("E_star", E_star), _finite_pos("G_star", G_star)
 
 
 def g_over_e(nu):
@@ -148,13 +158,17 @@ def hertz_force(d, R, E_star):
 @_together
 def contact_radius(d, R):
     """Eq. 3: contact radius a [m] = sqrt(R d); d >= 0 [m], R > 0 [m]."""
-    return _out(np.sqrt(_pos("R", R) * _arr("d", d, 0)))
+    R, d = _pos("R", R), _arr("d", d, 0)
+    with np.errstate(over="ignore"):
+        return _finite("the contact radius a", np.sqrt(R * d))
 
 
 @_together
 def tangential_stiffness(a, G_star):
     """Stiffness 2 a G* [N/m] of a stuck contact of radius a >= 0 [m], G_star > 0 [Pa]."""
-    return _out(2 * _arr("a", a, 0) * _pos("G_star", G_star))
+    a, G_star = _arr("a", a, 0), _pos("G_star", G_star)
+    with np.errstate(over="ignore"):
+        return _finite("the stiffness 2 a G*", 2 * a * G_star)
 
 
 @_together
@@ -162,7 +176,9 @@ def natural_frequency(a1, G_star, m):
     """omega_n = sqrt(2 a1 G* / m) [rad/s] of a runner of mass m > 0 [kg] on the stuck
     contact of radius a1 [m]."""
     k = tangential_stiffness(a1, G_star)
-    return _out(np.sqrt(k / _pos("m", m)))
+    m = _pos("m", m)
+    with np.errstate(over="ignore"):
+        return _finite("omega_n", np.sqrt(k / m))
 
 
 # ----------------------------------------------------------------------------- working points
@@ -307,7 +323,9 @@ def mindlin_ustar(mu, d, E_star, G_star):
     """Tangential displacement u* = mu E* d / G* [m] at which the whole contact slides;
     mu in (0, inf), d >= 0 [m], E_star, G_star > 0 [Pa]."""
     mu, d = _pos("mu", mu), _arr("d", d, 0)
-    return _out(mu * _pos("E_star", E_star) * d / _pos("G_star", G_star))
+    E_star, G_star = _pos("E_star", E_star), _pos("G_star", G_star)
+    with np.errstate(over="ignore"):
+        return _finite("u*", mu * E_star * d / G_star)
 
 
 @_together
@@ -319,5 +337,8 @@ def mindlin_force(u, mu, N, d, E_star, G_star):
     N = hertz_force(d, R, E_star)."""
     u, N = _arr("u", u), _arr("N", N, 0)
     us = np.asarray(mindlin_ustar(mu, d, E_star, G_star))
-    x = np.minimum(np.abs(u), us) / np.where(us > 0, us, 1.0)  # |u|/u* clipped to [0, 1]
-    return _out(np.sign(u) * np.asarray(mu) * N * (1 - (1 - x) ** 1.5))
+    # |u|/u* clipped to [0, 1]; u* = 0 (d = 0): every displacement is beyond it
+    x = np.where(us > 0, np.minimum(np.abs(u), us) / np.where(us > 0, us, 1.0), 1.0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _finite("the tangential force T", np.sign(u) * np.asarray(mu) * N
+                       * (1 - (1 - x) ** 1.5))

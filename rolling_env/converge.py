@@ -31,7 +31,7 @@ import numpy as np
 
 from . import analytic
 from . import experiments as ex
-from .io import atomic_write, write_text
+from .io import atomic_write, staged, write_text
 
 WP_CASES = [(0.93, 0.2, 2.2), (0.7, 0.1, 2.5), (0.5, 0.3, 5.0)]
 NAIVE_CASE = WP_CASES[1]
@@ -182,6 +182,7 @@ def headline(rows) -> dict:
     return out
 
 
+@staged()  # both files new, or neither
 def write(rows, out="results", name="work_precision") -> dict:
     """Write ``name``.csv (rows with the observed order per quantity) and ``name``.png."""
     import matplotlib

@@ -36,7 +36,7 @@ class SquareWave:
         check_range("a1", self.a1, 0.0, math.inf, lo_open=True, hi_open=True)
         check_range("R", self.R, 0.0, math.inf, lo_open=True, hi_open=True)
         check_range("tau", self.tau, 0.0, math.inf, lo_open=True, hi_open=True)
-        if self.direction not in (1, -1):
+        if isinstance(self.direction, (bool, np.bool_)) or self.direction not in (1, -1):
             raise ValueError(f"direction must be +1 or -1, got {self.direction}")
 
     @property

@@ -21,7 +21,7 @@ from scipy.optimize import brentq
 
 from . import analytic
 from .excitation import SquareWave
-from .model import Drive, DriveParams
+from .model import Drive, DriveParams, check_n_sub
 from .scenes import _SPEC as SCENE_RANGES
 from .validation import check_range
 
@@ -72,11 +72,15 @@ TICKS_PER_HALF_MAX = 10**5
 
 
 def _check_common(delta, eps, w, resolution):
+    """(delta, eps, w, resolution) checked, the first three as floats (a numeric string
+    passed the check and then failed inside the arithmetic); resolution as given when it is a
+    number (results report it as passed)."""
     # delta = 0 (no back-step contact) is physical: Eq. 32 gives v* = (1 - eps) omega R there
-    check_range("delta", delta, 0.0, 1.0)
-    check_range("eps", eps, -1e3, 1e3)
-    check_range("w", w, 0.0, 1e4, lo_open=True)
-    check_range("resolution", resolution, 2.0, 1e5)
+    delta = check_range("delta", delta, 0.0, 1.0)
+    eps = check_range("eps", eps, -1e3, 1e3)
+    w = check_range("w", w, 0.0, 1e4, lo_open=True)
+    res = check_range("resolution", resolution, 2.0, 1e5)
+    return delta, eps, w, (resolution if isinstance(resolution, numbers.Real) else res)
 
 
 def _check_run_length(periods, ticks_per_half, lo=1):
@@ -120,7 +124,8 @@ def period_impulse(delta, eps, w, vstar_ratio, *, resolution=DEFAULT_RESOLUTION,
                    geo: Geometry = Geometry(), ticks_per_half=1, n_sub=1, grid_offset=0.0):
     """Impulse of T over the last of ``periods`` periods with a prescribed runner
     (infinite friction), normalised as I / (2 G* a1^2 tau) (paper Fig. 8)."""
-    _check_common(delta, eps, w, resolution)
+    delta, eps, w, resolution = _check_common(delta, eps, w, resolution)
+    vstar_ratio = check_range("vstar_ratio", vstar_ratio, -1e3, 1e3)
     periods, ticks_per_half = _check_run_length(periods, ticks_per_half)
     run = _impulse_run(delta, eps, w, vstar_ratio, resolution, geo, ticks_per_half, n_sub,
                        grid_offset)
@@ -148,7 +153,7 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
     a steady state or where 1 - sqrt(delta) is smaller than two cells (not resolved: relative
     errors of 1-10% were measured there, several times Eq. 32 when w - 2 is below two cells
     too)."""
-    _check_common(delta, eps, w, resolution)
+    delta, eps, w, resolution = _check_common(delta, eps, w, resolution)
     if int(periods) != periods or not 2 <= periods <= STEADY_MAX_PERIODS:
         raise ValueError(f"periods must be an integer in [2, {STEADY_MAX_PERIODS}], got {periods}")
     periods = int(periods)
@@ -203,7 +208,7 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
                      + (f"; about {need} cells per a1 resolve it" if need <= 1e5 else
                         "; it cannot be resolved within the largest resolution (1e5)"))
     if w < 2:
-        notes.append("Eq. 32 holds for w >= 2 only; eq32 is null here")
+        notes.append("Eq. 32 holds for w >= 2 only: no eq32 value here")
         try:
             res["working_point_ratio"] = float(analytic.working_point_ratio(delta, eps, w))
         except ValueError as e:
@@ -218,7 +223,8 @@ def force_sum(delta, eps, w, vstar_ratio, *, resolution=DEFAULT_RESOLUTION, peri
               geo: Geometry = Geometry(), ticks_per_half=8):
     """Steady rolling force sum (T1 + T2)/(2 G* a1^2) (paper Fig. 6): T at the end of the last
     forth and back steps with a prescribed runner (steady for w >= 2)."""
-    _check_common(delta, eps, w, resolution)
+    delta, eps, w, resolution = _check_common(delta, eps, w, resolution)
+    vstar_ratio = check_range("vstar_ratio", vstar_ratio, -1e3, 1e3)
     periods, ticks_per_half = _check_run_length(periods, ticks_per_half)
     wave = SquareWave(delta, eps, w, geo.a1, geo.R, geo.tau)
     drv = _drive(wave, geo, DriveParams(geo.R, geo.E_star, geo.G_star), resolution)
@@ -292,10 +298,13 @@ def simulate(delta, eps, w, omega_n_ratio, *, mu=math.inf, periods=40,
     period got the sub-steps ``default_substeps`` asks for (not above omega_n/Omega = 10,
     where they are capped, nor with a coarser ``n_sub``): if not, the mean velocity is not
     converged in the step."""
-    _check_common(delta, eps, w, resolution)
-    check_omega_n_ratio(omega_n_ratio)
-    check_range("mu", mu, 0.0, math.inf, lo_open=True, allow_inf=True)
-    check_range("vstar0_ratio", vstar0_ratio, -1e3, 1e3)
+    delta, eps, w, resolution = _check_common(delta, eps, w, resolution)
+    omega_n_ratio = check_omega_n_ratio(omega_n_ratio)
+    mu = check_range("mu", mu, 0.0, math.inf, lo_open=True, allow_inf=True)
+    vstar0_ratio = check_range("vstar0_ratio", vstar0_ratio, -1e3, 1e3)
+    F_ext = check_range("F_ext", F_ext, -math.inf, math.inf)
+    if n_sub is not None:
+        n_sub = check_n_sub(n_sub)  # int(n_sub) below truncated 2.5 to 2
     periods, ticks_per_half = _check_run_length(periods, ticks_per_half, lo=2)
     wave = SquareWave(delta, eps, w, geo.a1, geo.R, geo.tau, direction)
     m = natural_frequency_mass(omega_n_ratio, wave, geo.G_star)

@@ -19,7 +19,7 @@ import numpy as np
 
 from . import analytic
 from . import experiments as ex
-from .io import atomic_write, write_text
+from .io import atomic_write, staged, write_text
 
 FIG_DELTA = 0.93          # paper Figs. 6, 8
 FIG_W = 2.2
@@ -76,9 +76,10 @@ def _csv_text(header, rows):
     return buf.getvalue()
 
 
+@staged()  # every file new, or (on any error, an interrupt included) none of them
 def make_figures(out="results/paper", n=41, resolution=32, resolution9=64) -> dict:
     """Write fig6_force_sum, fig8_impulse (.png, map .csv, zero line _zero.csv) and
-    fig9_working_point (.png, .csv) under ``out``; return the largest deviations of the
+    fig9_working_point (.png, .csv) under ``out``, all of them or none; return the largest deviations of the
     simulated zero lines and working points from Eq. 29 / Eq. 32 (in omega R)."""
     import matplotlib
     matplotlib.use("Agg")

@@ -1,27 +1,84 @@
-"""Atomic file writes: a result is either the old file or the complete new one."""
+"""Atomic file writes: a result is either the old file or the complete new one.
+
+``atomic_write`` writes one file through a temporary file beside it.  Inside
+``with staged():`` every ``atomic_write`` (at any depth of the calls) only writes its
+temporary file; the block's end renames them all into place, and an error anywhere in the
+block removes them all, so a command that writes several files (a CSV and its plot, the
+paper figures, the comparison tables) leaves either all of them new or all of them as they
+were: a full disk halfway no longer leaves a new CSV beside an old plot.
+"""
 from __future__ import annotations
 
+import contextlib
+import contextvars
+import errno
 import os
 import tempfile
 from pathlib import Path
 
+# the staged writes of the innermost ``staged()`` block: [(tmp, path), ...], or None
+_STAGE: contextvars.ContextVar[list | None] = contextvars.ContextVar("_STAGE", default=None)
+
 
 def atomic_write(path: str | os.PathLike, writer) -> Path:
     """Call ``writer(tmp_path)`` on a temporary file beside ``path``, then rename it into
-    place (``os.replace`` is atomic on POSIX); on any error the temporary file is removed."""
+    place (``os.replace`` is atomic on POSIX); on any error the temporary file is removed.
+    Inside ``staged()`` the rename waits for the end of the block."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    if path.is_dir():  # the rename would fail: say so before anything is written
+        raise IsADirectoryError(errno.EISDIR, "a folder has the name of the file to write",
+                                str(path))
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
     os.close(fd)
+    stage = _STAGE.get()
     try:
         writer(tmp)
         _give_mode(tmp, path)
-        os.replace(tmp, path)
+        if stage is None:
+            os.replace(tmp, path)
+        else:
+            stage.append((tmp, path))
     except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+        _remove(tmp)
         raise
     return path
+
+
+@contextlib.contextmanager
+def staged():
+    """Write every file of the block together: all renamed into place at its end, none if
+    it raises (see the module docstring).  Nested blocks join the outer one.  The renames
+    themselves are not one atomic step, but they cannot run out of space: what fails in
+    practice (a full disk, an unwritable folder, an error while rendering) fails while
+    writing the temporary files, before any target changes."""
+    if _STAGE.get() is not None:  # nested: the outer block commits
+        yield
+        return
+    stage: list = []
+    token = _STAGE.set(stage)
+    try:
+        yield
+    except BaseException:
+        _STAGE.reset(token)
+        for tmp, _ in stage:
+            _remove(tmp)
+        raise
+    _STAGE.reset(token)
+    for k, (tmp, path) in enumerate(stage):
+        try:
+            os.replace(tmp, path)
+        except BaseException:
+            for left, _ in stage[k:]:
+                _remove(left)
+            raise
+
+
+def _remove(tmp) -> None:
+    try:
+        os.unlink(tmp)
+    except FileNotFoundError:
+        pass
 
 
 def _read_umask() -> int:

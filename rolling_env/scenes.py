@@ -117,6 +117,8 @@ def _coerce(key, value):
         if not isinstance(value, (bool, np.bool_)):
             raise ValueError(f"scene key '{key}' must be true or false, got {value!r}")
         return bool(value)
+    if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "fiu":
+        value = value.item()  # a 0-d array, as reset options accept it
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, str)):
         raise ValueError(f"scene key '{key}' must be a number, got {value!r}")  # numpy scalars ok
     if isinstance(value, str):
@@ -128,6 +130,9 @@ def _coerce(key, value):
             except ValueError:
                 raise ValueError(f"scene key '{key}' must be a number, got {value!r}") from None
     if typ is int:
+        if isinstance(value, numbers.Integral) and not lo <= value <= hi:  # no float(): 10**400
+            shown = value if abs(value) < 10**18 else f"an integer of {len(str(abs(value)))} digits"
+            raise ValueError(f"scene key '{key}' must be an integer in [{lo}, {hi}], got {shown}")
         fv = float(value)
         if not math.isfinite(fv) or fv != int(fv):
             raise ValueError(f"scene key '{key}' must be an integer in [{lo}, {hi}], got {value!r}")
@@ -187,7 +192,7 @@ def load_scene(scene: str | os.PathLike | dict | Scene = "default", **overrides)
         src = "<dict>"
     else:
         path = Path(scene)
-        if path.suffix not in (".yaml", ".yml"):
+        if path.suffix.lower() not in (".yaml", ".yml"):
             path = SCENE_DIR / f"{scene}.yaml"
             if not path.exists():
                 raise ValueError(f"unknown scene {scene!r}; shipped scenes: "

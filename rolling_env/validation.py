@@ -19,6 +19,10 @@ def check_range(name: str, value, lo: float, hi: float, *, lo_open: bool = False
         x = float(value)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a number, got {value!r}") from None
+    except OverflowError:  # an integer beyond the float range (10**400)
+        raise ValueError(f"{name} must be in {_range(lo, hi, lo_open, hi_open, allow_inf)}, "
+                         f"got an integer too large for a float ({len(str(abs(value)))} "
+                         "digits)") from None
     if math.isnan(x):
         raise ValueError(f"{name} must be in {_range(lo, hi, lo_open, hi_open, allow_inf)}, "
                          "got NaN")

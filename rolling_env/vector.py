@@ -14,12 +14,14 @@ transitions are bit-identical to N single envs).  Two thin adapters:
 Seeding follows Gymnasium: env i of a batch seeded s behaves like a single env seeded s + i.
 The threaded kernel (``prange``) is used from ``PARALLEL_MIN_ENVS`` envs on: measured on the
 2-core machine (default scene, ``rolling-drive bench``, results/benchmarks.md, 2026-11-24) it
-is 0.6-0.75x the serial kernel at 1 env, 0.9x at 2, 1.04-1.05x at 4, 1.2-1.5x at 16 and
-1.85-2.0x at 256, where the second core gives about 2x.
+is 0.70-0.75x the serial kernel at 1 env, 0.8-0.9x at 2, 0.94-1.01x at 4, 1.4-1.5x at 16
+and 1.83-1.96x at 256 (nine runs on a quiet host), where the second core gives about 2x.
 """
 from __future__ import annotations
 
+import math
 import numbers
+import os
 from collections.abc import Mapping
 
 import numpy as np
@@ -47,6 +49,28 @@ def _check_seed(seed, name: str) -> int:
     return int(seed)
 
 
+def _physical_memory() -> float:
+    """Bytes of physical memory (inf where the OS does not say)."""
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        return math.inf
+
+
+def _check_memory(n: int, cell_bytes: int, scene) -> None:
+    """A batch whose cell arrays alone exceed the machine's memory is a ValueError naming
+    num_envs and the scene keys that size an env's cells (numpy's "Unable to allocate 7 PiB"
+    named neither)."""
+    need = float(n) * cell_bytes
+    have = _physical_memory()
+    if need > have:
+        raise ValueError(
+            f"num_envs = {n} envs x {cell_bytes / 2**20:.3g} MiB of cell state each "
+            f"(resolution = {scene.resolution!r}, stroke_roll = {scene.stroke_roll!r}) need "
+            f"{need / 2**30:.3g} GiB, more than this machine's {have / 2**30:.3g} GiB: "
+            "lower num_envs, or the scene's resolution or stroke")
+
+
 class BatchCore(CellViews):
     """N envs of one scene: state arrays with a leading env axis, ``step``, ``reset(mask)``."""
 
@@ -67,6 +91,7 @@ class BatchCore(CellViews):
         self.features = drive.kernel_features + (None,)  # (mu, mass, load, ledger)
         self.sv = EK.scene_vector(self.scene, self.a_max, drive)
         m = drive.grid.n
+        _check_memory(n, drive.cells.nbytes, self.scene)
         self.cells = np.zeros((n,) + drive.cells.shape)  # per env: U, A, B (and L), see _kernel
         self.st = np.zeros((n, K.N_STATE))
         self.p = np.tile(drive._p, (n, 1))
@@ -102,6 +127,11 @@ class BatchCore(CellViews):
     def reset(self, mask=None, options=None) -> None:
         """Reset the envs where ``mask`` is True (all when None).  ``options``: one dict for
         every env, or a sequence of num_envs dicts (or None), one per env."""
+        if mask is not None:
+            m = np.asarray(mask)
+            if m.dtype != np.bool_ or m.shape != (self.num_envs,):
+                raise ValueError(f"mask must be None or a bool array of shape "
+                                 f"({self.num_envs},) (True: reset that env), got {mask!r}")
         idx = np.arange(self.num_envs) if mask is None else np.flatnonzero(mask)
         # every env's options checked before any env changes: a bad one resets nothing
         given = self.check_options(options, idx)

@@ -1,6 +1,7 @@
 """Baselines and the training/evaluation scripts, run for real (short budgets)."""
 from __future__ import annotations
 
+import csv
 import json
 import os
 import signal
@@ -783,3 +784,26 @@ def test_a_scene_that_cannot_be_built_is_one_line_naming_its_keys(tmp_path, caps
                        str(tmp_path / "run")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "'resolution' = 4096" in err, err
+
+
+def test_evaluate_without_agents_refuses_unless_baselines_only(tmp_path, capsys):
+    """A mistyped --runs (no such folder) or a scene with no trained agent there replaced the
+    committed comparison with a baselines-only table, exit 0: now exit 2 naming --runs (and
+    the scene) with nothing written; --baselines-only compares the two baselines alone."""
+    from agents.evaluate import main as evaluate_main
+    out = tmp_path / "out"
+    base = ["--scenes", "heavy_inf_friction", "--episodes", "1", "--out", str(out)]
+    with pytest.raises(SystemExit) as e:
+        evaluate_main(base + ["--runs", str(tmp_path / "nonexistent")])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "--runs: no folder" in err and "--baselines-only" in err, err
+    (tmp_path / "runs" / "default" / "ppo_seed0").mkdir(parents=True)  # another scene's run
+    with pytest.raises(SystemExit) as e:
+        evaluate_main(base + ["--runs", str(tmp_path / "runs")])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "no trained agent for scene 'heavy_inf_friction'" in err, err
+    assert not out.exists() or not any(out.rglob("comparison*")), "a table was written"
+    assert evaluate_main(base + ["--baselines-only", "--runs", str(tmp_path / "nonexistent")]) == 0
+    with open(out / "comparison.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [r["controller"] for r in rows] == ["eq32-open-loop", "eq32-feedback"], rows

@@ -262,6 +262,13 @@ BAD = [
     # finite input whose result leaves the float range: named, not returned as inf
     (an.steady_forces, (0.5, 0.1, 0.1, 1e200, 1e200), "T1 overflows"),
     (an.invert_eq32_eps, (1e308, 0.7, 2.5), "eps overflows"),
+    (an.tangential_stiffness, (1e300, 1e300), "stiffness 2 a G\\* overflows"),
+    (an.natural_frequency, (1e-3, 1e10, 5e-324), "omega_n overflows"),
+    (an.mindlin_ustar, (1e300, 1e10, 1e300, 1e-300), "u\\* overflows"),
+    (an.mindlin_force, (1.0, 1e300, 1e300, 1e-20, 1.0, 1.0), "tangential force T overflows"),
+    (an.contact_radius, (1e300, 1e300), "contact radius a overflows"),
+    (an.effective_moduli, (5e-324, 0.3, 1e9, 0.3), "E_star leaves the float range"),
+    (an.effective_moduli, (1e308, 0.0, 1e308, 0.0), "G_star leaves the float range"),
 ]
 
 
@@ -343,3 +350,11 @@ def test_scalar_types_give_the_array_result(as_type):
     assert type(got) is float and abs(got - 8.0) <= 8e-15, f"hertz_force: {got!r}, not 8"
     with pytest.raises(ValueError, match=r"^w must be finite and in \(0, 1e\+15\]"):
         an.eq32(as_type(0), as_type(1), as_type(-3))
+
+
+def test_mindlin_force_without_indentation_is_full_sliding():
+    """d = 0 gives u* = 0: every displacement is beyond it, T = mu N sign(u) (the docstring's
+    law; it returned 0), and T(0) = 0."""
+    for u, want in ((1e-6, 0.3), (-1e-9, -0.3), (0.0, 0.0)):
+        got = an.mindlin_force(u, 0.3, 1.0, 0.0, 1e10, 1e10)
+        assert got == want, f"mindlin_force(u={u}, d=0) = {got}, want {want}"

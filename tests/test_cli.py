@@ -167,3 +167,59 @@ def test_negative_target_in_exponent_form_reaches_the_rollout(tmp_path, capsys):
     r = _json(capsys, "rollout", "--controller", "zero", "--target", "-3e-7", "--out",
               str(tmp_path), "--json")
     assert r["target"] == -3e-7, r
+
+
+def test_staged_writes_are_all_or_none(tmp_path):
+    """Inside ``staged()`` the files appear only at the end of the block, all together; an
+    error anywhere leaves every old file as it was and no temporary file behind; a nested
+    block joins the outer one."""
+    from rolling_env.io import staged, write_text
+    a, b = tmp_path / "a.csv", tmp_path / "b.png"
+    write_text(a, "old a")
+    with pytest.raises(RuntimeError):
+        with staged():
+            write_text(a, "new a")
+            assert a.read_text() == "old a", "renamed before the block ended"
+            write_text(b, "new b")
+            raise RuntimeError("fails after two writes")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv"] and a.read_text() == "old a"
+    with staged():
+        write_text(a, "new a")
+        with staged():
+            write_text(b, "new b")
+        assert not b.exists(), "the nested block renamed its file before the outer one ended"
+    assert a.read_text() == "new a" and b.read_text() == "new b"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "b.png"]
+
+
+def test_rollout_writes_its_csv_and_plot_together(tmp_path, capsys):
+    """A plot that cannot be written (its name taken by a folder) left the new CSV beside it,
+    over an earlier rollout a new CSV beside an old plot: now neither changes (exit 2)."""
+    out = tmp_path / "out"
+    (out / "default_zero_seed0.png").mkdir(parents=True)
+    assert main(["rollout", "--controller", "zero", "--out", str(out)]) == 2
+    assert "default_zero_seed0.png" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == ["default_zero_seed0.png"], (
+        sorted(p.name for p in out.iterdir()))
+
+
+def test_figures_are_written_all_or_none(tmp_path, monkeypatch):
+    """make_figures writes Figs. 6, 8 and 9: a failure while writing Fig. 9 left new Figs. 6
+    and 8 beside an old Fig. 9; now no file of the set is written."""
+    import matplotlib.figure
+
+    from rolling_env import figures
+    calls = []
+    real = matplotlib.figure.Figure.savefig
+
+    def savefig(self, fname, *args, **kwargs):
+        calls.append(fname)
+        if len(calls) == 3:  # fig6, fig8, then fig9's PNG
+            raise OSError(28, "No space left on device")
+        return real(self, fname, *args, **kwargs)
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", savefig)
+    monkeypatch.setattr(figures, "FIG9_DELTAS", (0.7,))
+    with pytest.raises(OSError, match="No space left"):
+        figures.make_figures(tmp_path, n=5, resolution=4, resolution9=4)
+    assert len(calls) == 3, calls
+    assert list(tmp_path.iterdir()) == [], sorted(p.name for p in tmp_path.iterdir())

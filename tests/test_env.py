@@ -568,3 +568,17 @@ def test_overflow_of_a_light_loaded_runner_names_the_scene_keys():
     core.reset()
     with pytest.raises(FloatingPointError, match=r"raise runner_mass or lower \|F_ext\|"):
         core.step(np.zeros((2, 3)))
+
+
+def test_scene_inputs_beyond_the_float_range_and_suffix_case(tmp_path):
+    """An integer beyond the float range (10**400) raised a bare OverflowError naming no key;
+    a scene file whose suffix is upper case (.YAML) was taken for an unknown scene name; a
+    0-d array override was refused while numpy scalars were taken."""
+    from rolling_env.scenes import SCENE_DIR
+    for key in ("episode_steps", "R"):
+        with pytest.raises(ValueError, match=f"^scene key '{key}' must be"):
+            rolling_env.make("default", **{key: 10**400})
+    assert rolling_env.make("default", R=np.array(2e-3)).unwrapped.scene.R == 2e-3
+    upper = tmp_path / "Mine.YAML"
+    upper.write_text((SCENE_DIR / "resonant.yaml").read_text())
+    assert rolling_env.make(str(upper)).unwrapped.scene.name == "resonant"

@@ -178,3 +178,24 @@ def test_fig9_markers_match_eq32():
     rows = figures.fig9_points([0.0, 0.5], resolution=64)
     dev = max(abs(r[3] - r[4]) for r in rows)
     assert dev < 1e-4, f"Fig. 9 working points deviate from Eq. 32 by {dev:.2e} (tol. 1e-4)"
+
+
+def test_env_slip_work_converges_first_order_in_the_sub_step():
+    """tools/env_substeps.py (results/env_substeps.md): the same actions at 8, 32 and 128
+    sub-steps on the default scene; the episode's slip work rises towards its limit and its
+    differences shrink by about the step ratio (first order: 4x, accepted 2.5-6x), and the
+    README's figure for the shipped 8 sub-steps (32-40% low against 2048) holds against the
+    Richardson limit of 32 and 128 (30-45% low)."""
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "tools" / "env_substeps.py"
+    spec = importlib.util.spec_from_file_location("env_substeps", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    rows = mod.study((8, 32, 128), scenes=["default"])
+    s8, s32, s128 = (r["slip_work"] for r in rows)
+    assert 0 < s8 < s32 < s128, (s8, s32, s128)
+    ratio = (s32 - s8) / (s128 - s32)
+    assert 2.5 < ratio < 6.0, f"not first order in the step: difference ratio {ratio:.2f}"
+    limit = s128 + (s128 - s32) / 3  # Richardson, first order, step ratio 4
+    assert 0.30 < 1 - s8 / limit < 0.45, f"8 sub-steps {1 - s8 / limit:.1%} low"

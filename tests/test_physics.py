@@ -278,6 +278,31 @@ def test_bad_dimensionless_inputs_rejected(args, name):
         ex.working_point(*args)
 
 
+@pytest.mark.parametrize("call,match", [
+    (lambda: ex.simulate(0.7, 0.1, 2.5, 0.5, n_sub=2.5, periods=4), r"^n_sub must be an integer"),
+    (lambda: ex.simulate(0.7, 0.1, 2.5, 0.5, direction=True, periods=4),
+     r"^direction must be \+1 or -1, got True"),
+    (lambda: ex.period_impulse(0.7, 0.1, 2.5, float("nan")), r"^vstar_ratio must be in"),
+    (lambda: ex.force_sum(0.7, 0.1, 2.5, "x"), r"^vstar_ratio must be a number"),
+    (lambda: ex.simulate(0.7, 0.1, 2.5, 0.5, F_ext=float("inf"), periods=4), r"^F_ext must be"),
+])
+def test_experiment_inputs_are_checked_not_truncated(call, match):
+    """n_sub = 2.5 ran as 2 in simulate (int() before the check), direction=True ran as +1, a
+    NaN prescribed velocity was reported as "vstar must be finite" (no parameter, no range)."""
+    with pytest.raises(ValueError, match=match):
+        call()
+
+
+def test_numeric_strings_are_the_numbers_they_spell():
+    """check_range returns float(value); the experiments now use what it returns, so "0.1"
+    (accepted by the check) no longer crashes inside the arithmetic."""
+    a = ex.working_point(0.7, "0.1", 2.5, resolution=8)["simulated"]
+    assert a == ex.working_point(0.7, 0.1, 2.5, resolution=8)["simulated"], a
+    r = ex.simulate(0.7, 0.1, 2.5, 0.5, mu="0.3", periods=4)
+    assert r["mean_v_star_over_omega_R"] == ex.simulate(0.7, 0.1, 2.5, 0.5, mu=0.3,
+                                                        periods=4)["mean_v_star_over_omega_R"]
+
+
 def test_working_point_runs_to_periodic_steady_state():
     """Where w - 2 and 1 - sqrt(delta) are both below a cell the start-up transient decays over
     many periods: the working point runs until it is periodic (3 periods gave 1.8e-4 for

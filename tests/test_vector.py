@@ -88,6 +88,26 @@ def test_reset_mask_resets_only_masked():
     assert np.array_equal(core.obs[1], expect), (core.obs[1], expect)
 
 
+@pytest.mark.parametrize("mask", [[2], np.array([2]), "abc", np.array([0, 1, 0]),
+                                  np.array([False, True, False, False, True]),
+                                  np.array([[False, True, False]])])
+def test_reset_mask_must_be_one_bool_per_env(mask):
+    """An index list ([2], read as 'True at env 0' by flatnonzero), a string, an int array or
+    a bool array of another shape reset the wrong env or half-reset one (the target drawn,
+    the physics kept): a ValueError naming mask and its shape, with nothing changed."""
+    core = BatchCore(3, max_episode_steps=100)
+    core.seed(0)
+    core.reset()
+    core.step(np.full((3, 3), 0.5))
+    before = {k: getattr(core, k).copy() for k in ("st", "U", "target", "steps")}
+    state = [r.bit_generator.state for r in core.rngs]
+    with pytest.raises(ValueError, match=r"^mask must be None or a bool array of shape \(3,\)"):
+        core.reset(mask)
+    for k, v in before.items():
+        assert np.array_equal(getattr(core, k), v), f"{k} changed by a refused reset"
+    assert [r.bit_generator.state for r in core.rngs] == state, "a generator advanced"
+
+
 def test_parallel_kernel_equals_serial():
     a, b = BatchCore(70), BatchCore(70)  # >= PARALLEL_MIN_ENVS: threaded kernel
     assert a._step_fn is EK.env_step_parallel
@@ -439,3 +459,11 @@ def test_gymnasium_vector_env_needs_a_reset_before_step_like_sync():
     env.reset(seed=0, options={"reset_mask": np.array([False, True, False])})
     obs, *_ = env.step(acts)  # every env has been reset once now
     assert obs.shape == (3, EK.N_OBS)
+
+
+def test_a_batch_beyond_the_machine_memory_names_num_envs():
+    """numpy's "Unable to allocate 7.9 PiB" named neither num_envs nor the scene keys that
+    size an env's cells; checked before anything is allocated."""
+    with pytest.raises(ValueError, match=r"^num_envs = 1000000000000 envs x .* MiB of cell "
+                                         r"state each \(resolution = 16.0, stroke_roll"):
+        BatchCore(10**12)

@@ -44,19 +44,19 @@ def _run(args):
     key = scene_key(args.scene)
     stem = f"{key}_{controller_label(args.controller)}_seed{args.seed}"
     out = Path(args.out)
-    csv_path = write_csv(data, out / f"{stem}.csv")
-    png_path = plot(data, out / f"{stem}.png", title=f"{key}: {args.controller}")
-    res = {"csv": str(csv_path), "png": str(png_path), "return": data["return"],
-           "final_error": data["final_error"], "target": float(data["target"][-1]),
-           "slip_work": data["total_slip_work"], "steps": int(data["step"][-1])}
-    if args.frame:
-        import matplotlib.image
-
-        from ..io import atomic_write
-        frame_path = out / f"{stem}_frame.png"
-        frame = env.render()
-        atomic_write(frame_path, lambda p: matplotlib.image.imsave(p, frame, format="png"))
-        res["frame"] = str(frame_path)
+    from ..io import atomic_write, staged
+    with staged():  # the CSV, its plot (and the frame) all new, or none of them
+        csv_path = write_csv(data, out / f"{stem}.csv")
+        png_path = plot(data, out / f"{stem}.png", title=f"{key}: {args.controller}")
+        res = {"csv": str(csv_path), "png": str(png_path), "return": data["return"],
+               "final_error": data["final_error"], "target": float(data["target"][-1]),
+               "slip_work": data["total_slip_work"], "steps": int(data["step"][-1])}
+        if args.frame:
+            import matplotlib.image
+            frame_path = out / f"{stem}_frame.png"
+            frame = env.render()
+            atomic_write(frame_path, lambda p: matplotlib.image.imsave(p, frame, format="png"))
+            res["frame"] = str(frame_path)
     env.close()
     emit(res, args.json, "\n".join(f"{k}: {v}" for k, v in res.items()))
     return 0
