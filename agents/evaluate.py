@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 import rolling_env
+from rolling_env.io import staged
 from rolling_env.rollout import rollout
 
 from .baselines import Eq32Design, Eq32Feedback, Eq32OpenLoop
@@ -455,7 +456,7 @@ def main(argv=None):
             setups.append((scene, env, controllers_for(scene, runs, env)))
         except (ValueError, OSError, KeyError) as e:
             p.error(f"--runs: {e}")
-        if runs is not None and len(setups[-1][2]) == 2:  # the two baselines only
+        if runs is not None and set(setups[-1][2]) <= set(BASELINES):  # no agent
             p.error(f"--runs: no trained agent for scene {scene!r} under "
                     f"{str(runs / scene_key(scene))!r} (train one, leave the scene out of "
                     "--scenes, or pass --baselines-only)")
@@ -468,7 +469,6 @@ def main(argv=None):
             print(f"{row['scene']:20s} {row['controller']:16s} final|e|/tol "
                   f"{row['final_abs_error_mean'] / row['tolerance']:8.2f}  reached "
                   f"{row['reached_fraction']:.2f}  slip {row['slip_work_mean']:.3e} J", flush=True)
-    from rolling_env.io import staged
     with staged():  # written only once every scene has been evaluated, and all or none
         for scene, traj in plots:
             plot_scene(scene, runs, traj, out)

@@ -57,25 +57,20 @@ def _w(w, lo=0.0, lo_open=True):
     return _arr("w", w, lo, W_MAX, lo_open=lo_open)
 
 
-def _finite(name, a):
-    """A result that overflowed for finite input is a ValueError, not an inf."""
+def _finite(name, a, positive=False):
+    """A result that overflowed for finite input is a ValueError, not an inf; with
+    ``positive`` also one that underflowed to 0 (or below)."""
     if np.ndim(a) == 0:  # scalar input: math.isfinite is ~10x cheaper than the array test
         a = float(a)
-        ok = math.isfinite(a)
+        ok = math.isfinite(a) and (a > 0 or not positive)
     else:
-        ok = np.all(np.isfinite(a))
-    if not ok:
-        raise ValueError(f"{name} overflows the float range for this input (inputs too large)")
-    return _out(a)
-
-
-def _finite_pos(name, a):
-    """A result that must be positive and finite: overflow to inf or underflow to 0 for
-    input in range is a ValueError naming it."""
-    if not np.all(np.isfinite(a) & (np.asarray(a) > 0)):
+        ok = np.all(np.isfinite(a)) and (not positive or np.all(a > 0))
+    if ok:
+        return _out(a)
+    if positive:
         raise ValueError(f"{name} leaves the float range for this input (inputs too large or "
                          "too small)")
-    return _out(a)
+    raise ValueError(f"{name} overflows the float range for this input (inputs too large)")
 
 
 # scalars that always broadcast: _together skips its shape check for calls made of them only
@@ -123,7 +118,7 @@ def effective_moduli(E1, nu1, E2, nu2):
         G1, G2 = E1 / (2 * (1 + nu1)), E2 / (2 * (1 + nu2))
         E_star = 1 / ((1 - nu1 ** 2) / E1 + (1 - nu2 ** 2) / E2)
         G_star = 1 / ((2 - nu1) / (4 * G1) + (2 - nu2) / (4 * G2))
-    return _finite_pos("E_star", E_star), _finite_pos("G_star", G_star)
+    return _finite("E_star", E_star, positive=True), _finite("G_star", G_star, positive=True)
 
 
 def g_over_e(nu):

@@ -244,9 +244,10 @@ def batched(n_envs=256, ticks=200, single_steps=20_000, sizes=(1, 4, 16, 64, 256
 
     from . import _envkernel as EK
     from .sb3_vec import RollingDriveVecEnv
+    from .scenes import load_scene
     from .vector import BatchCore
 
-    episode = BatchCore(1).max_episode_steps
+    episode = load_scene().episode_steps  # the default scene's
 
     def core(n, fn, threads=None):
         c = BatchCore(n)
@@ -283,8 +284,8 @@ def sb3_training_env(sizes=(1, 8, 256), ticks=2000):
 
     import rolling_env
     from .sb3_vec import RollingDriveVecEnv
-    from .vector import BatchCore
-    episode = BatchCore(1).max_episode_steps
+    from .scenes import load_scene
+    episode = load_scene().episode_steps  # the default scene's
     rows = []
     for n in sizes:
         passes = {}

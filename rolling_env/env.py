@@ -311,9 +311,10 @@ def raise_step_error(bad: int, action, shape, st, scene: Scene | None = None) ->
         raise ValueError("action must be finite and inside [-1, 1]")
     try:
         check_flags(st)
-        raise FloatingPointError("non-finite state after a physics tick")
     except FloatingPointError as e:
         raise FloatingPointError(f"{e}{_overflow_hint(scene)}") from None
+    # no flag raised: a non-finite reward or velocity
+    raise FloatingPointError(f"non-finite state after a physics tick{_overflow_hint(scene)}")
 
 
 def _overflow_hint(scene: Scene | None) -> str:

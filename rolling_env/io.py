@@ -60,11 +60,11 @@ def staged():
     try:
         yield
     except BaseException:
-        _STAGE.reset(token)
         for tmp, _ in stage:
             _remove(tmp)
         raise
-    _STAGE.reset(token)
+    finally:
+        _STAGE.reset(token)
     for k, (tmp, path) in enumerate(stage):
         try:
             os.replace(tmp, path)

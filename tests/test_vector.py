@@ -111,7 +111,7 @@ def test_reset_mask_must_be_one_bool_per_env(mask):
 def test_parallel_kernel_equals_serial():
     a, b = BatchCore(70), BatchCore(70)  # >= PARALLEL_MIN_ENVS: threaded kernel
     assert a._step_fn is EK.env_step_parallel
-    b._step_fn = rolling_env._envkernel.env_step_serial
+    b._step_fn = EK.env_step_serial
     a.seed(1), b.seed(1)
     a.reset(), b.reset()
     for acts in _actions(4, n=70, steps=10):
