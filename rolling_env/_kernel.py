@@ -119,7 +119,8 @@ W_U, W_A, W_B, W_L = 0, 1, 2, 3
 # rows of the friction work array L = W[W_L:]
 L_LIMIT = 0      # friction limit mu E*/G* integral of uN over the cell's part in contact
 L_E0, L_E1, L_E2 = 1, 2, 3  # released energy of an edge cell this sub-step: e0 + e1 s + e2 s^2
-L_INV_ELL = 4    # 1 / overlap of an edge cell with the contact at the end of the sub-step (0: none)
+L_QLIM = 4       # friction limit per unit overlap of an edge cell at the end of the sub-step:
+                 # mu E*/G* times the mean uN over its part in contact (0: none in contact)
 N_LCOL = 5
 
 
@@ -174,6 +175,21 @@ def _normal_content(xL, xR, c, a, d, inv3R):
         return 0.0
     val = _inner_content(lo - c, hi - c, d, inv3R)
     return val if val > 0.0 else 0.0
+
+
+@njit(inline="always", **JIT)
+def _edge_limit(xL, xR, c, a, d, inv3R, muEG):
+    """Friction limit of a cell's part in contact, muEG times the integral of uN over it, and
+    that limit per unit overlap (muEG times the mean uN: no division); (0, 0) out of contact."""
+    lo = max(xL, c - a)
+    hi = min(xR, c + a)
+    if hi <= lo:
+        return 0.0, 0.0
+    zl = lo - c
+    zh = hi - c
+    q = muEG * (d - (zl * zl + zl * zh + zh * zh) * inv3R)
+    q = q if q > 0.0 else 0.0
+    return (hi - lo) * q, q
 
 
 @njit(inline="always", **JIT)
@@ -457,10 +473,11 @@ def _set_radius(W, st, p, a_new, d_new, mu):
 
 
 @njit(inline="always", **JIT)
-def _slide(Ut, Li, ie):
+def _slide(Ut, Li, q):
     """A content Ut beyond its friction limit +-Li slides to it.  Returns (the clipped
-    content, the slip work Li (|Ut| - Li) / overlap, whether it slid); ``ie`` = 1 / overlap,
-    0 for a cell out of contact (no work: not inf * 0).  Branch-free (selects, and min/max
+    content, the slip work (|Ut| - Li) q, whether it slid); ``q`` = Li / overlap, the limit
+    per unit length (the friction stress times the slid distance (|Ut| - Li) / overlap; 0 for
+    a cell out of contact, and no division in the tick).  Branch-free (selects, and min/max
     for the clip): the loops in ``_commit`` and ``_snap_inner`` vectorise with it, and their
     scalar remainders (the last 1-3 cells) have no branch to mispredict: written as nested
     conditionals, the clip compiled to two branches there (2-3% of the env step with
@@ -468,7 +485,7 @@ def _slide(Ut, Li, ie):
     when it is NaN), so the non-finite check still sees it."""
     ex = abs(Ut) - Li
     over = ex > 0.0
-    work = Li * ex * ie if (over & (ie > 0.0)) else 0.0
+    work = ex * q if over else 0.0
     return min(max(Ut, -Li), Li), work, over
 
 
@@ -654,7 +671,7 @@ def _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass, edges):
     """Commit of the cells i0..i1, U = A + B s clipped to the friction limit.  Returns (T1,
     Ta, slip, clipped).  ``edges`` None: i0..i1 are inner cells (B = dx dt, overlap dx).
     ``edges`` True: every cell of the contact, the inner cells j0..j1 as above and the edge
-    cells with the B and 1 / overlap the build pass stored for them, in one loop (a select
+    cells with the B and limit per unit overlap the build pass stored for them, in one loop (a select
     per cell instead of a separate scalar loop over the few edge cells: 7% of the default env
     step; for the inner cells alone the selects and their loads cost more than they save)."""
     T1 = 0.0
@@ -665,17 +682,18 @@ def _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass, edges):
     n_in = uint64(max(j1 - j0 + 1, 0))
     for i in _cells(i0, i1 + 1):
         Bi = dxdt
-        ie = inv_dx
         if edges is not None:
             inner = (i - j_lo) < n_in  # unsigned: wraps to a large number below j0
             Bm = W[W_B, i]  # loaded unconditionally so that the choices are selects
             Bi = dxdt if inner else Bm
-            if mu is not None:
-                im = W[W_L + L_INV_ELL, i]
-                ie = inv_dx if inner else im
         Ut = W[W_A, i] + Bi * s
         if mu is not None:
-            Ut, work, over = _slide(Ut, W[W_L + L_LIMIT, i], ie)
+            Li = W[W_L + L_LIMIT, i]
+            q = Li * inv_dx
+            if edges is not None:
+                qm = W[W_L + L_QLIM, i]
+                q = q if inner else qm
+            Ut, work, over = _slide(Ut, Li, q)
             clipped |= over
             slip += work
             if mass is not None:
@@ -709,7 +727,7 @@ def _snap_inner(W, j0, j1, x_lo, dx, c, muEG, d_new, inv3R, inv_dx):
         Li = muEG * (val if val > 0.0 else 0.0)
         Ui = W[W_U, i]
         ex = abs(Ui) - Li
-        Ui, work, over = _slide(Ui, Li, inv_dx)  # overlap dx
+        Ui, work, over = _slide(Ui, Li, Li * inv_dx)  # overlap dx
         slip += work
         snap += 0.5 * ex * ex * inv_dx if over else 0.0
         W[W_U, i] = Ui
@@ -725,7 +743,7 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
     vs_presc: runner velocity when ``mass is None`` (prescribed runner), else ignored.
     mu / mass / load: float or None (infinite friction / prescribed runner / no load).
     W: work array of shape (``work_rows(mu is not None)``, n): U, A, B and, with finite
-    friction, L = W[W_L:] (friction limit, the released-energy coefficients and 1 / overlap
+    friction, L = W[W_L:] (friction limit, the released-energy coefficients and limit per unit overlap
     of edge cells).
     ledger: True keeps the impulse and the energy ledger (``ST_IMP``, ``ST_REL``,
     ``ST_DRIVE``, ``ST_RUNNER``, ``ST_EXT``, ``OUT_IMP``); None leaves them out (the env needs
@@ -848,11 +866,10 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
             SA += Ai
             SB += Bi
             if mu is not None:
-                # friction limit and 1 / overlap at the end of the sub-step (the commit's
-                # slip work divides by the overlap)
-                ell = _overlap(xL, xR, c1, a)
-                Li = muEG * _normal_content(xL, xR, c1, a, d, inv3R) if ell > 0.0 else 0.0
-                L[L_INV_ELL, i] = 1.0 / ell if ell > 0.0 else 0.0
+                # friction limit at the end of the sub-step and the limit per unit overlap
+                # (the commit's slip work: the slid distance is the excess over the overlap)
+                Li, q = _edge_limit(xL, xR, c1, a, d, inv3R, muEG)
+                L[L_QLIM, i] = q
                 L[0, i] = Li
                 if mass is not None:
                     Ut, dU = _clip_slope(Ai + Bi * sv0, Li, Bi)
@@ -899,7 +916,7 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
             rel = 0.0
             # branch-free (a cell beyond its limit slides to it, adding the slip work; the
             # others add exactly 0 to it): the env with friction commits every cell in one
-            # loop (inner cells: B = dx dt and overlap dx; edge cells: the B and 1 / overlap
+            # loop (inner cells: B = dx dt and overlap dx; edge cells: the B and limit per unit overlap
             # of the build pass); otherwise the inner cells, then the edge cells one by one
             # (with the ledger: their released energy)
             edge_cells = _edges(i0, i1, j0, j1)
@@ -938,7 +955,7 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                                 Ln = muEG * _normal_content(xL, xL + dx, cn, a, d, inv3R)
                                 ei = min(ei, 0.5 * Ln * Ln / ln)
                         rel += ei
-                    Ut, work, over = _slide(Ut, Li, L[L_INV_ELL, i])
+                    Ut, work, over = _slide(Ut, Li, L[L_QLIM, i])
                     clipped |= over
                     slip += work
                     if mass is not None:

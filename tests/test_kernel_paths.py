@@ -89,6 +89,36 @@ def test_closed_form_edge_cell_matches_the_walk_on_piece_boundaries():
                               f"{(U0, xL, xR, c0, a, u, dt)}")
 
 
+def test_edge_limit_is_the_friction_limit_and_its_value_per_unit_overlap():
+    """``_edge_limit`` (the edge cells' friction limit and the limit per unit overlap the
+    commit's slip work takes, instead of a division by the overlap) against the limit from
+    ``_normal_content``: to 1e-13 of it; the limit per unit overlap times the overlap is the
+    limit; (0, 0) for a cell out of contact, and a cell whose part in contact has uN < 0
+    nowhere (uN >= 0 inside the contact by construction, so only round-off could)."""
+    rng = np.random.default_rng(11)
+    dx, xL, a, c, _u, _dt, _U0 = _random_cells(rng, 4000)
+    R = 10.0 ** rng.uniform(0, 3, dx.size)
+    d = a * a / R
+    muEG = 10.0 ** rng.uniform(-2, 2, dx.size)
+    n_in = 0
+    for k in range(dx.size):
+        inv3R = 1.0 / (3.0 * R[k])
+        xR = xL[k] + dx[k]
+        Li, q = K._edge_limit(xL[k], xR, c[k], a[k], d[k], inv3R, muEG[k])
+        ell = K._overlap(xL[k], xR, c[k], a[k])
+        want = muEG[k] * K._normal_content(xL[k], xR, c[k], a[k], d[k], inv3R)
+        if ell == 0.0:
+            assert (Li, q) == (0.0, 0.0), f"cell {k} out of contact: limit {Li}, q {q}"
+            continue
+        n_in += 1
+        assert q >= 0.0 and Li >= 0.0, f"cell {k}: negative limit {Li} or q {q}"
+        assert Li == pytest.approx(want, rel=1e-13, abs=1e-13 * muEG[k] * d[k] * ell), (
+            f"cell {k}: limit {Li}, from the normal content {want}")
+        assert q * ell == pytest.approx(Li, rel=1e-15, abs=1e-300), (
+            f"cell {k}: q * overlap = {q * ell}, limit {Li}")
+    assert n_in > 1000, f"only {n_in} of the random cells touch their contact"
+
+
 def test_closed_form_edge_cell_below_the_rounding_step_stays_finite():
     """A cell narrower than the rounding step of its coordinates (x + a gives the same float at
     both cell edges) leaves the contact with nothing, as in the walk, not with 0/0 = NaN."""
@@ -98,21 +128,21 @@ def test_closed_form_edge_cell_below_the_rounding_step_stays_finite():
 
 def _commit_reference(W, i0, i1, j0, j1, dxdt, s, inv_dx, mass):
     """Plain-Python commit of cells i0..i1 (finite friction): inner cells j0..j1 with B = dx dt
-    and overlap dx, edge cells with the build pass's B and 1 / overlap; a content beyond its
-    limit slides to it (slip work L (|U| - L) / overlap, none for a cell out of contact)."""
+    and overlap dx, edge cells with the build pass's B and limit per unit overlap q; a content
+    beyond its limit slides to it (slip work (|U| - L) L / overlap, none for a cell out of
+    contact)."""
     W = W.copy()
     T1 = Ta = slip = 0.0
     clipped = False
     for i in range(i0, i1 + 1):
         inner = j0 <= i <= j1
         Bi = dxdt if inner else W[K.W_B, i]
-        ie = inv_dx if inner else W[K.W_L + K.L_INV_ELL, i]
         Li = W[K.W_L + K.L_LIMIT, i]
+        q = Li * inv_dx if inner else W[K.W_L + K.L_QLIM, i]
         Ut = W[K.W_A, i] + Bi * s
         if abs(Ut) > Li:
             clipped = True
-            if ie > 0.0:
-                slip += Li * (abs(Ut) - Li) * ie
+            slip += (abs(Ut) - Li) * q
             Ut = math.copysign(Li, Ut)
         W[K.W_U, i] = Ut
         T1 += Ut
@@ -137,9 +167,9 @@ def test_commit_of_every_cell_matches_a_plain_reference(i0, i1, j0, j1, mass):
     n = 12
     W = rng.normal(size=(K.work_rows(True), n))
     W[K.W_L + K.L_LIMIT] = rng.uniform(0.0, 1.0, n)
-    W[K.W_L + K.L_INV_ELL] = rng.uniform(0.5, 4.0, n)
+    W[K.W_L + K.L_QLIM] = W[K.W_L + K.L_LIMIT] * rng.uniform(0.5, 4.0, n)  # 1 / overlap
     W[K.W_L + K.L_LIMIT, 1] = 0.0  # an edge cell that left the contact
-    W[K.W_L + K.L_INV_ELL, 1] = 0.0
+    W[K.W_L + K.L_QLIM, 1] = 0.0
     W[K.W_A, 1] = 0.3
     W[K.W_A, 5] = -3.0  # with B = 0.5: A + B s = -2.15, beyond its limit (<= 1): slides
     W[K.W_B, 5] = 0.5
@@ -174,7 +204,7 @@ def test_commit_keeps_a_nan_content(edges, where):
     n = 11
     W = np.zeros((K.work_rows(True), n))
     W[K.W_L + K.L_LIMIT] = 1.0
-    W[K.W_L + K.L_INV_ELL] = 1.0
+    W[K.W_L + K.L_QLIM] = 1.0
     W[K.W_B] = 0.5
     W[K.W_A] = 2.0  # every other cell beyond its limit: the clip is exercised
     W[K.W_A, where] = np.nan
