@@ -475,9 +475,10 @@ def _set_radius(W, st, p, a_new, d_new, mu):
 @njit(inline="always", **JIT)
 def _slide(Ut, Li, q):
     """A content Ut beyond its friction limit +-Li slides to it.  Returns (the clipped
-    content, the slip work (|Ut| - Li) q, whether it slid); ``q`` = Li / overlap, the limit
-    per unit length (the friction stress times the slid distance (|Ut| - Li) / overlap; 0 for
-    a cell out of contact, and no division in the tick).  Branch-free (selects, and min/max
+    content, the slip work, whether it slid).  The slip work is the friction force Li times
+    the slid distance (|Ut| - Li) / overlap, i.e. (|Ut| - Li) q with ``q`` = Li / overlap,
+    the limit per unit overlap (stored for the edge cells, so that the tick divides by no
+    overlap; 0 for a cell out of contact).  Branch-free (selects, and min/max
     for the clip): the loops in ``_commit`` and ``_snap_inner`` vectorise with it, and their
     scalar remainders (the last 1-3 cells) have no branch to mispredict: written as nested
     conditionals, the clip compiled to two branches there (2-3% of the env step with
@@ -671,9 +672,10 @@ def _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass, edges):
     """Commit of the cells i0..i1, U = A + B s clipped to the friction limit.  Returns (T1,
     Ta, slip, clipped).  ``edges`` None: i0..i1 are inner cells (B = dx dt, overlap dx).
     ``edges`` True: every cell of the contact, the inner cells j0..j1 as above and the edge
-    cells with the B and limit per unit overlap the build pass stored for them, in one loop (a select
-    per cell instead of a separate scalar loop over the few edge cells: 7% of the default env
-    step; for the inner cells alone the selects and their loads cost more than they save)."""
+    cells with the B and limit per unit overlap the build pass stored for them, in one loop
+    (a select per cell instead of a separate scalar loop over the few edge cells: 7% of the
+    default env step; for the inner cells alone the selects and their loads cost more than
+    they save)."""
     T1 = 0.0
     Ta = 0.0
     slip = 0.0
@@ -743,8 +745,8 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
     vs_presc: runner velocity when ``mass is None`` (prescribed runner), else ignored.
     mu / mass / load: float or None (infinite friction / prescribed runner / no load).
     W: work array of shape (``work_rows(mu is not None)``, n): U, A, B and, with finite
-    friction, L = W[W_L:] (friction limit, the released-energy coefficients and limit per unit overlap
-    of edge cells).
+    friction, L = W[W_L:] (friction limit, the released-energy coefficients and the limit
+    per unit overlap of edge cells).
     ledger: True keeps the impulse and the energy ledger (``ST_IMP``, ``ST_REL``,
     ``ST_DRIVE``, ``ST_RUNNER``, ``ST_EXT``, ``OUT_IMP``); None leaves them out (the env needs
     neither: its observation, reward and info use T, v*, x*, the slip work and the stuck
@@ -916,9 +918,9 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
             rel = 0.0
             # branch-free (a cell beyond its limit slides to it, adding the slip work; the
             # others add exactly 0 to it): the env with friction commits every cell in one
-            # loop (inner cells: B = dx dt and overlap dx; edge cells: the B and limit per unit overlap
-            # of the build pass); otherwise the inner cells, then the edge cells one by one
-            # (with the ledger: their released energy)
+            # loop (inner cells: B = dx dt and overlap dx; edge cells: the B and the limit per
+            # unit overlap of the build pass); otherwise the inner cells, then the edge cells
+            # one by one (with the ledger: their released energy)
             edge_cells = _edges(i0, i1, j0, j1)
             if ledger is None and mu is not None:
                 T1, Ta, slip, clipped = _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass,
