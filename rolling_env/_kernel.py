@@ -456,15 +456,16 @@ def _set_radius(W, st, p, a_new, d_new, mu):
             xR = xL + dx
             e_rel, _, ln = _shrink_cell(U, i, xL, dx, c, a_old, a_new)
             rel += e_rel
-            Li = muEG * _normal_content(xL, xR, c, a_new, d_new, inv3R) if ln > 0.0 else 0.0
-            if ln > 0.0:
-                Ui = U[i]
-                if abs(Ui) > Li:
-                    ex = abs(Ui) - Li
-                    slip += Li * ex / ln
-                    snap += 0.5 * ex * ex / ln
-                    U[i] = Li if Ui > 0.0 else -Li
-            T += U[i]
+            # the clip-and-slip of the tick's commit (a cell cut off entirely has Ui = Li = 0)
+            Li, q = _edge_limit(xL, xR, c, a_new, d_new, inv3R, muEG)
+            Ui = U[i]
+            Uc, work, over = _slide(Ui, Li, q)
+            if over and ln > 0.0:
+                ex = abs(Ui) - Li
+                snap += 0.5 * ex * ex / ln
+            slip += work
+            U[i] = Uc
+            T += Uc
     st[ST_REL] += rel
     st[ST_SLIP] += slip
     st[ST_SNAP] += snap
