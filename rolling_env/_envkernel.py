@@ -12,6 +12,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from . import _compiler
 from . import _kernel as K
 
 # scene vector
@@ -146,7 +147,8 @@ def env_step_serial(act, sv, target, steps, W, st, p, out, obs, extra, mu, mass,
     return bad
 
 
-@njit(cache=True, parallel=True, error_model="numpy")  # NRT on: prange needs it
+@njit(cache=True, parallel=True, error_model="numpy",  # NRT on: prange needs it
+      pipeline_class=_compiler.Compiler)
 def env_step_parallel(act, sv, target, steps, W, st, p, out, obs, extra, mu, mass,
                       load, ledger):
     """``env_step_serial`` with the envs spread over threads (prange)."""
@@ -198,9 +200,10 @@ def scene_vector(scene, a_max: float, drive) -> np.ndarray:
 
 
 def _keep_cache_in_step():
-    """The cache of these kernels is valid only for the current _kernel.py (see _cachestamp)."""
+    """The cache of these kernels is valid only for the current _kernel.py and _compiler.py
+    (see _cachestamp)."""
     from ._cachestamp import bind_sources, drop_if_stale, sources_digest
-    digest = sources_digest(K.__file__, __file__)
+    digest = sources_digest(K.__file__, __file__, _compiler.__file__)
     kernels = [f for f in globals().values() if hasattr(f, "_cache") and hasattr(f, "py_func")]
     if not bind_sources(kernels, digest):
         drop_if_stale(getattr(env_step_serial._cache, "cache_path", None), "_envkernel", digest)

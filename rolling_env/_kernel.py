@@ -46,6 +46,11 @@ Compiler options (``JIT``, for every kernel here and in ``_envkernel``):
   before the work array W): 5% of the serial kernel, and in the threaded batch both threads
   contended for the same counters (aggregate +12% without them).  A kernel that allocated
   would fail to compile, not misbehave.  ``env_step_parallel`` keeps counting (prange needs it).
+* ``pipeline_class=_compiler.Compiler``: numba's default pipeline, compiled with LLVM's
+  predicated loop tails where the CPU has AVX-512 (the cell loops run 8 cells wide with a
+  masked last iteration instead of a 16-wide body, a 4-wide epilogue and a scalar remainder:
+  about 5% of the env step); the options are set only while our kernels compile (see
+  ``_compiler``).
 """
 from __future__ import annotations
 
@@ -54,14 +59,16 @@ import math
 import numpy as np
 from numba import njit, uint64
 
+from ._compiler import Compiler
 
 
 def _jit_options() -> dict:
-    """``cache``, ``error_model="numpy"`` and, where this numba has it, ``_nrt=False`` (see the
+    """``cache``, ``error_model="numpy"``, the pipeline of ``_compiler`` (LLVM's predicated
+    loop tails, where they apply) and, where this numba has it, ``_nrt=False`` (see the
     module docstring).  ``_nrt`` is private: should a numba release drop it, the kernels keep
     reference counting (about 5% slower) rather than fail to compile (numba refuses unknown
     options at the first call); tests/test_kernel_paths.py says so with the numba tested."""
-    opts = dict(cache=True, error_model="numpy")
+    opts = dict(cache=True, error_model="numpy", pipeline_class=Compiler)
     try:
         from numba.core.cpu import CPUTargetOptions
         if hasattr(CPUTargetOptions, "_nrt"):

@@ -114,9 +114,8 @@ def _core_pass(core, ticks, seed=0, threads=None):
         try:
             t = time.perf_counter()
             for a in acts:
-                core.step(a)
-                tr = core.steps >= core.max_episode_steps
-                if tr.any():
+                _, _, tr = core.step(a)
+                if np.count_nonzero(tr):  # a quarter of the time of tr.any() for 256 envs
                     core.reset(tr)
             dt = time.perf_counter() - t
         finally:

@@ -7,13 +7,15 @@ import textwrap
 import time
 from types import SimpleNamespace
 
+from rolling_env import _compiler
 from rolling_env import _envkernel as EK
 from rolling_env import _kernel as K
 from rolling_env._cachestamp import bind_sources, drop_if_stale, sources_digest
 
 
 def test_env_kernels_are_bound_to_the_current_physics():
-    digest = sources_digest(K.__file__, EK.__file__)
+    # the compiler options of _compiler shape their machine code too
+    digest = sources_digest(K.__file__, EK.__file__, _compiler.__file__)
     for f in (EK.env_step_serial, EK.env_step_parallel, EK._env_tick):
         stamp = f._cache._cache_file._source_stamp
         assert stamp[0] == "rolling_env" and stamp[1][1] == digest, f"{f} not bound: {stamp}"
