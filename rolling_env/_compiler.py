@@ -65,16 +65,16 @@ ENABLED = _supported_here()
 
 
 @contextlib.contextmanager
-def loop_options(enabled: bool | None = None):
+def loop_options():
     """LLVM's loop options of ``LOOP_OPTIONS`` set for the duration (outermost use only),
-    LLVM's defaults restored after it, all inside numba's global compiler lock."""
+    LLVM's defaults restored after it, all inside numba's global compiler lock; nothing where
+    they do not apply (``ENABLED``)."""
     global _depth
-    enabled = ENABLED if enabled is None else enabled
+    if not ENABLED:
+        yield
+        return
+    import llvmlite.binding as ll
     with global_compiler_lock:
-        if not enabled:
-            yield
-            return
-        import llvmlite.binding as ll
         if _depth == 0:
             for on, _ in LOOP_OPTIONS:
                 ll.set_option("", on)

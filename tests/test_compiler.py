@@ -5,6 +5,7 @@ import re
 import numpy as np
 import pytest
 from numba import njit
+from numba.core.errors import TypingError
 
 from rolling_env import _compiler
 
@@ -70,7 +71,21 @@ def test_options_restored_when_our_compile_fails():
     def bad(x):
         return x.no_such_attribute
 
-    with pytest.raises(Exception):
+    with pytest.raises(TypingError):
         njit(cache=False, pipeline_class=_compiler.Compiler)(bad)(np.zeros(2))
     assert _compiler._depth == 0, "nesting counter left raised after a failed compile"
     assert _code(_asm(_fresh())) == before, "LLVM options left set after a failed compile"
+
+
+def test_every_kernel_compiles_under_the_pipeline():
+    """A kernel decorated without ``pipeline_class`` (e.g. a new one not given ``K.JIT``)
+    would silently lose the loop options; ``_compiler`` on the dispatcher is numba's."""
+    from rolling_env import _envkernel as EK
+    from rolling_env import _kernel as K
+    kernels = {f"{m.__name__}.{n}": v for m in (K, EK) for n, v in vars(m).items()
+               if hasattr(v, "py_func")}
+    assert len(kernels) > 20, f"kernels not found: {sorted(kernels)}"
+    other = sorted(n for n, d in kernels.items()
+                   if getattr(getattr(d, "_compiler", None), "pipeline_class", None)
+                   is not _compiler.Compiler)
+    assert not other, f"kernels compiled outside rolling_env._compiler.Compiler: {other}"
