@@ -132,6 +132,8 @@ class RollingDriveEnv(gym.Env):
         self._out = np.zeros((1, K.N_OUT))
         self._obs = np.zeros((1, EK.N_OBS), dtype=np.float32)
         self._extra = np.zeros((1, EK.N_X))
+        self._rew = np.zeros(1)  # the kernel's reward and truncation outputs
+        self._trunc = np.zeros(1, dtype=np.bool_)
         self._history = []
         self._render_state = {}  # this env's figure and window (rolling_env.render)
 
@@ -176,7 +178,8 @@ class RollingDriveEnv(gym.Env):
         a = load_actions(action, (3,), self._act)
         W, st, p = self._arrays
         bad = EK.env_step_serial(self._act, self._sv, self._target, self._steps, W, st, p,
-                                 self._out, self._obs, self._extra, *self._features)
+                                 self._out, self._obs, self._extra, self._rew, self._trunc,
+                                 self.scene.episode_steps, *self._features)
         if bad:
             raise_step_error(bad, a, (3,), st, self.scene)
         x = self._extra[0]
@@ -184,8 +187,8 @@ class RollingDriveEnv(gym.Env):
             self._history.append(x[EK.X_XS])
             if self.render_mode == "human":
                 self.render()
-        truncated = bool(self._steps[0] >= self.scene.episode_steps)
-        return self._obs[0].copy(), float(x[EK.X_REWARD]), False, truncated, self._info()
+        return (self._obs[0].copy(), float(self._rew[0]), False, bool(self._trunc[0]),
+                self._info())
 
     def render(self):
         if self.render_mode is None:

@@ -76,7 +76,7 @@ class BatchCore(CellViews):
 
     #: attributes holding one entry per env (leading axis num_envs); the rest is shared
     PER_ENV = frozenset({"cells", "U", "A", "B", "L", "st", "p", "target", "steps", "act",
-                         "out", "obs", "extra", "rngs"})
+                         "out", "obs", "extra", "rew", "trunc", "rngs"})
 
     def __init__(self, num_envs: int, scene="default", max_episode_steps=None, **overrides):
         if (isinstance(num_envs, (bool, np.bool_)) or not isinstance(num_envs, numbers.Integral)
@@ -101,6 +101,8 @@ class BatchCore(CellViews):
         self.out = np.zeros((n, K.N_OUT))
         self.obs = np.zeros((n, EK.N_OBS), dtype=np.float32)
         self.extra = np.zeros((n, EK.N_X))
+        self.rew = np.zeros(n)  # written by the kernel: reward and steps >= max_episode_steps
+        self.trunc = np.zeros(n, dtype=np.bool_)
         self.rngs = [seeding.np_random(None)[0] for _ in range(n)]
         self._step_fn = EK.env_step_parallel if n >= PARALLEL_MIN_ENVS else EK.env_step_serial
 
@@ -160,11 +162,11 @@ class BatchCore(CellViews):
         """Advance every env one tick; returns (obs float32, rewards, truncated)."""
         a = load_actions(actions, (self.num_envs, 3), self.act)
         bad = self._step_fn(self.act, self.sv, self.target, self.steps, self.cells, self.st, self.p,
-                            self.out, self.obs, self.extra, *self.features)
+                            self.out, self.obs, self.extra, self.rew, self.trunc,
+                            self.max_episode_steps, *self.features)
         if bad:
             raise_step_error(bad, a, (self.num_envs, 3), self.st, self.scene)
-        return self.obs.copy(), self.extra[:, EK.X_REWARD].copy(), \
-            self.steps >= self.max_episode_steps
+        return self.obs.copy(), self.rew.copy(), self.trunc.copy()
 
     def info(self, i: int) -> dict:
         return info_dict(self.extra[i], self.target[i])

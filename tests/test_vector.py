@@ -120,6 +120,35 @@ def test_parallel_kernel_equals_serial():
         assert np.array_equal(oa, ob) and np.array_equal(ra, rb)
 
 
+
+@pytest.mark.parametrize("num_envs", [3, 70])  # serial and threaded kernel
+def test_step_returns_the_kernels_reward_and_truncation_as_copies(num_envs):
+    """``BatchCore.step`` returns the reward and ``steps >= max_episode_steps`` that the kernel
+    writes per env: equal to the extras' reward column and to the step counts compared in
+    numpy, also after the limit changes mid-episode (SB3's set_attr does that) and for envs
+    reset at different times; and as copies that the next step does not overwrite."""
+    core = BatchCore(num_envs, max_episode_steps=12)
+    assert core._step_fn is (EK.env_step_parallel if num_envs >= 4 else EK.env_step_serial)
+    core.seed(3)
+    core.reset()
+    kept = []
+    for k, acts in enumerate(_actions(5, n=num_envs, steps=30)):
+        if k == 20:
+            core.max_episode_steps = 7  # ends the running episodes at their next step
+        obs, rew, trunc = core.step(acts)
+        assert np.array_equal(rew, core.extra[:, EK.X_REWARD]), f"step {k}: reward differs"
+        assert np.array_equal(trunc, core.steps >= core.max_episode_steps), (
+            f"step {k}: truncation {trunc.astype(int)} vs steps {core.steps}")
+        assert trunc.dtype == np.bool_ and rew.dtype == np.float64
+        kept.append((rew, rew.copy(), trunc, trunc.copy()))
+        if k == 5:
+            core.reset(np.arange(num_envs) % 2 == 0)  # half the envs start over early
+        if np.count_nonzero(trunc):
+            core.reset(trunc)
+    assert any(t.any() for _, _, t, _ in kept) and not all(t.all() for _, _, t, _ in kept)
+    for k, (r, r0, t, t0) in enumerate(kept):
+        assert np.array_equal(r, r0) and np.array_equal(t, t0), f"step {k}'s output changed"
+
 def test_bad_batch_actions_raise():
     core = BatchCore(2)
     core.reset()
