@@ -532,7 +532,7 @@ def report(res) -> str:
     return "\n".join(L) + "\n"
 
 
-def ratio_bound(single, serial, one_thread, threads, target=10.0) -> dict:
+def ratio_bound(single, serial, one_thread, threads, target=10.0, efficiency=1.0) -> dict:
     """What batching can give at most, from rates measured in one run (env steps/s).
 
     The single env's step (``1/single``) is the physics tick, which costs what one env-step
@@ -540,11 +540,12 @@ def ratio_bound(single, serial, one_thread, threads, target=10.0) -> dict:
     batch of one), plus a Python layer (gym.make's wrappers, the action check, the info dict,
     the kernel dispatch) that batching removes.  With ``threads`` threads scaling perfectly the
     batched env steps at ``threads * one_thread``, so the ratio is at most
-    ``threads * one_thread / single``.  A physics tick ``f`` times faster speeds up both; the
-    ratio reaches ``target`` at ``f = (target / (threads * one_thread) - 1 / serial) /
-    (1 / single - 1 / serial)`` (1 or less: within reach now)."""
+    ``threads * one_thread / single``.  At a measured fraction ``efficiency`` of that rate, a
+    physics tick ``f`` times faster (it speeds up both envs) makes the ratio reach ``target``
+    at ``f = (target / (threads * one_thread * efficiency) - 1 / serial) / (1 / single -
+    1 / serial)`` (1 or less: within reach now; ``efficiency`` = 1: perfect scaling)."""
     x, y, y1 = 1.0 / single, 1.0 / serial, 1.0 / one_thread
-    need = (target * y1 / threads - y) / (x - y) if x > y else math.inf
+    need = (target * y1 / (threads * efficiency) - y) / (x - y) if x > y else math.inf
     return dict(step_us=1e6 * x, physics_us=1e6 * y, python_us=1e6 * (x - y),
                 bound=threads * x / y1, speedup_needed=need, target=target)
 
@@ -553,6 +554,9 @@ def _ratio_bound(b) -> list:
     one = max(b["serial"], b["threaded_1"])
     r = ratio_bound(b["single"], b["serial"], one, b["threads"])
     got = b["threaded"] / b["single"]
+    eff = got / r["bound"]
+    r_eff = ratio_bound(b["single"], b["serial"], one, b["threads"], efficiency=eff)
+    f, f_eff = r["speedup_needed"], r_eff["speedup_needed"]
     return ["Where the single env's time goes, and what batching can give at most (same run): "
             f"its step takes {r['step_us']:.2f} us, of which {r['physics_us']:.2f} us is the "
             "physics tick (one env-step of the batched serial kernel, which the single env runs "
@@ -560,9 +564,12 @@ def _ratio_bound(b) -> list:
             "wrappers, action check, info dict, kernel dispatch) that batching removes.  With "
             f"{b['threads']} threads scaling perfectly on the faster one-thread kernel "
             f"({1e6 / one:.2f} us per env-step), batching reaches at most {r['bound']:.1f}x; "
-            f"measured {got:.1f}x ({got / r['bound']:.0%} of that bound).  "
-            f"{r['target']:.0f}x needs a physics tick {r['speedup_needed']:.2f}x faster at the "
-            "same accuracy (a faster tick also speeds up the single env)."]
+            f"measured {got:.1f}x ({eff:.0%} of that bound).  "
+            + (f"{r['target']:.0f}x is reached." if got >= r["target"] else
+               f"At that efficiency {r['target']:.0f}x needs a physics tick {f_eff:.2f}x as "
+               "fast at the same accuracy (a faster tick also speeds up the single env); with "
+               "perfect scaling it would need "
+               + (f"{f:.2f}x." if f > 1.0 else "none (the bound is above it)."))]
 
 
 def _parallel_min():

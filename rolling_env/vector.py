@@ -13,9 +13,10 @@ transitions are bit-identical to N single envs).  Two thin adapters:
 
 Seeding follows Gymnasium: env i of a batch seeded s behaves like a single env seeded s + i.
 The threaded kernel (``prange``) is used from ``PARALLEL_MIN_ENVS`` envs on: measured on the
-2-core machine (default scene, ``rolling-drive bench``, results/benchmarks.md, 2026-11-24) it
-is 0.70-0.75x the serial kernel at 1 env, 0.8-0.9x at 2, 0.94-1.01x at 4, 1.4-1.5x at 16
-and 1.83-1.96x at 256 (nine runs on a quiet host), where the second core gives about 2x.
+2-core machine (default scene, ``rolling-drive bench``, results/benchmarks.md, eleven runs of
+2026-11-24's twelfth session) it is 0.57-0.68x the serial kernel at 1 env, 0.74-0.85x at 2,
+0.90-1.06x at 4, 1.27-1.49x at 16 and 1.72-2.08x at 256, where the second core gives about
+2x.
 """
 from __future__ import annotations
 

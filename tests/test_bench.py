@@ -10,17 +10,20 @@ from rolling_env import bench
 from rolling_env.bench import ratio_bound
 
 
-@pytest.mark.parametrize("single,serial,one,threads", [
-    (136e3, 450e3, 520e3, 2), (170e3, 448e3, 523e3, 2), (50e3, 1e6, 1e6, 4)])
-def test_ratio_bound_speedup_reaches_the_target(single, serial, one, threads):
+@pytest.mark.parametrize("single,serial,one,threads,eff", [
+    (136e3, 450e3, 520e3, 2, 1.0), (170e3, 448e3, 523e3, 2, 1.0), (50e3, 1e6, 1e6, 4, 1.0),
+    (183.6e3, 945e3, 945e3, 2, 0.94), (136e3, 450e3, 520e3, 2, 0.8)])
+def test_ratio_bound_speedup_reaches_the_target(single, serial, one, threads, eff):
     """A physics tick f = speedup_needed times faster makes batched / single equal the target:
     the single env keeps its Python layer and runs the faster tick, the batched env runs the
-    faster tick on every thread."""
-    r = ratio_bound(single, serial, one, threads, target=10.0)
+    faster tick on every thread at the given efficiency (a fraction of perfect scaling)."""
+    r = ratio_bound(single, serial, one, threads, target=10.0, efficiency=eff)
     f = r["speedup_needed"]
     step = r["python_us"] + r["physics_us"] / f
-    batched_per_step = 1e6 / one / f / threads
+    batched_per_step = 1e6 / one / f / (threads * eff)
     assert step / batched_per_step == pytest.approx(10.0, rel=1e-12), r
+    if eff < 1.0:  # a lower efficiency needs a faster tick
+        assert f > ratio_bound(single, serial, one, threads, target=10.0)["speedup_needed"], r
     assert r["bound"] == pytest.approx(threads * one / single, rel=1e-12)
     assert r["step_us"] == pytest.approx(r["python_us"] + r["physics_us"], rel=1e-12)
 
