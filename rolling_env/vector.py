@@ -259,7 +259,6 @@ class RollingDriveVectorEnv(_gym_vector_base()):
                                          if any_done else actions)
         if any_done:
             self.core.reset(was_done)  # the envs that ended last step start over instead
-            self.core.steps[was_done] = 0
             obs = self.core.obs.copy()
             rew[was_done] = 0.0
             trunc[was_done] = False
