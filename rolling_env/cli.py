@@ -7,11 +7,14 @@ Bad arguments give a one-line error naming the parameter and exit code 2.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
 import math
 import re
+import signal
 import sys
+import threading
 
 COMMAND_MODULES = ["physics", "figures", "converge", "stability", "bench", "rollout"]
 
@@ -133,11 +136,30 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@contextlib.contextmanager
+def _ctrl_c_ends_the_process():
+    """SIGINT with the OS default action for the command: Ctrl-C then ends a long compiled
+    kernel call too (numba code never returns to the interpreter, so KeyboardInterrupt would
+    wait for the call's end: a simulate of 1e9 sub-steps ran on for minutes).  File writes
+    switch KeyboardInterrupt back on while they run (``io.interrupt_raises``), so Ctrl-C
+    leaves no temporary file and never half a result.  Restored afterwards (``main`` also
+    runs inside other programs, e.g. the tests)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_DFL)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with _ctrl_c_ends_the_process():
+            return int(args.func(args) or 0)
     except (ValueError, OSError) as e:  # validation errors from the library, or an output
         # path that cannot be written (--out names a file, no permission): one line, exit 2
         print(f"rolling-drive {args.command}: error: {e}", file=sys.stderr)

@@ -217,8 +217,15 @@ def build_drive(scene: Scene) -> tuple[Drive, float]:
     params = DriveParams(sc.R, sc.E_star, sc.G_star, mu=sc.mu, m=sc.runner_mass, F_ext=sc.F_ext)
     d_max = (3 * sc.N_max / (4 * sc.E_star * math.sqrt(sc.R))) ** (2 / 3)
     a_max = math.sqrt(sc.R * d_max)
-    drive = Drive(params, a_ref=a_max, resolution=sc.resolution,
-                  stroke=(-sc.stroke_roll, sc.stroke_roll), a_max=a_max, t_ref=sc.period)
+    try:
+        drive = Drive(params, a_ref=a_max, resolution=sc.resolution,
+                      stroke=(-sc.stroke_roll, sc.stroke_roll), a_max=a_max, t_ref=sc.period)
+    except ValueError as e:  # the Drive's message names its own arguments: map them to keys
+        raise ValueError(
+            f"scene '{sc.name}' cannot be built: {e} (the env builds the drive from the scene "
+            f"keys: stroke = +-stroke_roll = {sc.stroke_roll:g} m, a_ref = a_max = the contact "
+            f"radius at N_max = {sc.N_max:g} N ({a_max:.3g} m), resolution = "
+            f"{sc.resolution:g}, t_ref = period = {sc.period:g} s, m = runner_mass)") from None
     return drive, a_max
 
 
@@ -240,11 +247,11 @@ def check_time_limit(max_episode_steps, scene: Scene) -> int:
     return int(m)
 
 
-def target_option(scene: Scene, options) -> float | None:
+def target_option(scene: Scene, options, name: str = "options['target']") -> float | None:
     """The target [m] that ``reset(options=...)`` asks for, checked, or None to draw one.
     ``options`` is None or a dict whose only key is "target": a finite number with
     |target| <= OBS_BOUND target_max (beyond, the error observation would sit at its clip
-    for the whole episode)."""
+    for the whole episode).  ``name``: what the error messages call the target."""
     if options is None:
         return None
     if not isinstance(options, Mapping):
@@ -260,13 +267,17 @@ def target_option(scene: Scene, options) -> float | None:
     if isinstance(t, np.ndarray) and t.ndim == 0:
         t = t.item()  # a 0-d array is its number
     if isinstance(t, (bool, np.bool_)) or not isinstance(t, numbers.Real):
-        raise ValueError(f"options['target'] must be a number [m], got {t!r}")
-    t = float(t)
+        raise ValueError(f"{name} must be a number [m], got {t!r}")
     lim = OBS_BOUND * scene.target_max
+    try:
+        t = float(t)
+    except OverflowError:  # an integer beyond the float range (10**400)
+        raise ValueError(f"{name} must be a finite displacement in [-{lim!r}, {lim!r}] m, got "
+                         f"an integer too large for a float") from None
     if not (math.isfinite(t) and abs(t) <= lim):
         # the bound at full precision: 10 x 5e-7 rounds to 4.9999999999999996e-06, and a
         # shortened bound would read as if it admitted 5e-06
-        raise ValueError(f"options['target'] must be a finite displacement in [-{lim!r}, "
+        raise ValueError(f"{name} must be a finite displacement in [-{lim!r}, "
                          f"{lim!r}] m (OBS_BOUND x the scene's target_max, where the error "
                          f"observation saturates), got {t!r}")
     return t

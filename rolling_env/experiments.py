@@ -23,7 +23,7 @@ from . import analytic
 from .excitation import SquareWave
 from .model import Drive, DriveParams, check_n_sub
 from .scenes import _SPEC as SCENE_RANGES
-from .validation import check_range
+from .validation import check_int, check_range
 
 DEFAULT_RESOLUTION = 64.0  # springs per a1; chosen from results/work_precision.csv (README)
 
@@ -86,18 +86,14 @@ def _check_common(delta, eps, w, resolution):
 def _check_run_length(periods, ticks_per_half, lo=1):
     """``periods`` an integer >= lo and ``ticks_per_half`` an integer in [1,
     TICKS_PER_HALF_MAX], with at most MAX_TICKS ticks in all; returns both as ints."""
-    for name, x, a, b in (("ticks_per_half", ticks_per_half, 1, TICKS_PER_HALF_MAX),
-                          ("periods", periods, lo, MAX_TICKS // 2)):
-        ok = (isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
-              and a <= x <= b and x == int(x))
-        if not ok:
-            raise ValueError(f"{name} must be an integer in [{a}, {b}], got {x!r}")
-    ticks = 2 * int(periods) * int(ticks_per_half)
+    ticks_per_half = check_int("ticks_per_half", ticks_per_half, 1, TICKS_PER_HALF_MAX)
+    periods = check_int("periods", periods, lo, MAX_TICKS // 2)
+    ticks = 2 * periods * ticks_per_half
     if ticks > MAX_TICKS:
         raise ValueError(f"periods x 2 ticks_per_half = {ticks} ticks exceeds {MAX_TICKS:.0e} "
                          "(one run keeps every tick's inputs and outputs in memory): lower "
                          "periods or ticks_per_half")
-    return int(periods), int(ticks_per_half)
+    return periods, ticks_per_half
 
 
 def _impulse_run(delta, eps, w, vstar_ratio, resolution, geo, ticks_per_half, n_sub,
@@ -154,9 +150,7 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
     errors of 1-10% were measured there, several times Eq. 32 when w - 2 is below two cells
     too)."""
     delta, eps, w, resolution = _check_common(delta, eps, w, resolution)
-    if int(periods) != periods or not 2 <= periods <= STEADY_MAX_PERIODS:
-        raise ValueError(f"periods must be an integer in [2, {STEADY_MAX_PERIODS}], got {periods}")
-    periods = int(periods)
+    periods = check_int("periods", periods, 2, STEADY_MAX_PERIODS)
     t0 = time.perf_counter()
     runs = [_impulse_run(delta, eps, w, V, resolution, geo, 1, 1, grid_offset)
             for V in (0.0, 0.1)]
@@ -452,6 +446,7 @@ def step_status(omega_n_ratio, wave: SquareWave, n_sub, ticks_per_half=1) -> dic
 
 
 MINDLIN_MU_MAX = 1e3  # beyond it the slip distance u* = 3 mu N / (16 G* a1) leaves any contact
+MINDLIN_POINTS_MAX = 10**5  # displacement points (ticks of one run)
 
 
 def mindlin(mu, *, points=21, resolution=DEFAULT_RESOLUTION, geo: Geometry = Geometry(),
@@ -460,8 +455,8 @@ def mindlin(mu, *, points=21, resolution=DEFAULT_RESOLUTION, geo: Geometry = Geo
 
     Returns ``u_over_ustar``, ``T_over_muN`` (simulated) and ``analytic`` lists."""
     check_range("mu", mu, 0.0, MINDLIN_MU_MAX, lo_open=True)
-    if int(points) != points or points < 2:
-        raise ValueError(f"points must be an integer >= 2, got {points}")
+    points = check_int("points", points, 2, MINDLIN_POINTS_MAX)
+    n_sub = check_n_sub(n_sub)
     check_range("resolution", resolution, 2.0, 1e5)
     a1 = geo.a1
     d1 = a1 ** 2 / geo.R
@@ -471,11 +466,11 @@ def mindlin(mu, *, points=21, resolution=DEFAULT_RESOLUTION, geo: Geometry = Geo
     drv.reset()
     ustar = analytic.mindlin_ustar(mu, d1, geo.E_star, geo.G_star)
     N = analytic.hertz_force(d1, geo.R, geo.E_star)
-    u = np.linspace(0.0, 1.2 * ustar, int(points))
+    u = np.linspace(0.0, 1.2 * ustar, points)
     du = np.diff(u)
     dt = geo.tau
     # no rolling, runner held: creep rate -v = du/dt
-    out = drv.run(dt_tick=dt, n_sub=int(n_sub), omega_R=np.zeros(du.size), v=-du / dt,
+    out = drv.run(dt_tick=dt, n_sub=n_sub, omega_R=np.zeros(du.size), v=-du / dt,
                   d=np.full(du.size, d1), vstar=np.zeros(du.size))
     T = np.concatenate([[0.0], out["T"]])
     ana = analytic.mindlin_force(u, mu, N, d1, geo.E_star, geo.G_star)

@@ -13,17 +13,41 @@ import contextlib
 import contextvars
 import errno
 import os
+import signal
 import tempfile
+import threading
 from pathlib import Path
 
 # the staged writes of the innermost ``staged()`` block: [(tmp, path), ...], or None
 _STAGE: contextvars.ContextVar[list | None] = contextvars.ContextVar("_STAGE", default=None)
 
 
+@contextlib.contextmanager
+def interrupt_raises():
+    """Ctrl-C raises KeyboardInterrupt inside the block even where the caller made SIGINT
+    end the process (the CLI does, so that Ctrl-C stops a long compiled kernel call, which
+    never returns to the interpreter to raise): the writes below then remove their
+    temporary files on Ctrl-C instead of leaving them behind.  A no-op elsewhere."""
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.SIG_DFL):
+        yield
+        return
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def atomic_write(path: str | os.PathLike, writer) -> Path:
     """Call ``writer(tmp_path)`` on a temporary file beside ``path``, then rename it into
     place (``os.replace`` is atomic on POSIX); on any error the temporary file is removed.
     Inside ``staged()`` the rename waits for the end of the block."""
+    with interrupt_raises():
+        return _atomic_write(path, writer)
+
+
+def _atomic_write(path, writer) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.is_dir():  # the rename would fail: say so before anything is written
@@ -55,23 +79,24 @@ def staged():
     if _STAGE.get() is not None:  # nested: the outer block commits
         yield
         return
-    stage: list = []
-    token = _STAGE.set(stage)
-    try:
-        yield
-    except BaseException:
-        for tmp, _ in stage:
-            _remove(tmp)
-        raise
-    finally:
-        _STAGE.reset(token)
-    for k, (tmp, path) in enumerate(stage):
+    with interrupt_raises():
+        stage: list = []
+        token = _STAGE.set(stage)
         try:
-            os.replace(tmp, path)
+            yield
         except BaseException:
-            for left, _ in stage[k:]:
-                _remove(left)
+            for tmp, _ in stage:
+                _remove(tmp)
             raise
+        finally:
+            _STAGE.reset(token)
+        for k, (tmp, path) in enumerate(stage):
+            try:
+                os.replace(tmp, path)
+            except BaseException:
+                for left, _ in stage[k:]:
+                    _remove(left)
+                raise
 
 
 def _remove(tmp) -> None:

@@ -8,14 +8,13 @@ omega R and v).  The compiled kernel is chosen once, from the feature set of the
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import _kernel as K
 from .analytic import hertz_force, hertz_indentation
-from .validation import as_real_array, check_range
+from .validation import as_real_array, check_int, check_range
 
 _INF = math.inf
 
@@ -182,6 +181,12 @@ class Drive(CellViews):
         self._mass = params.m / self.M0 if free else None
         self._load = params.F_ext / self.F0 if load else None
         self._check_scales()
+        if self._mu is not None:
+            # mu E*/G* beyond the float range makes every friction limit inf, which the stick
+            # count reads as slipping (-inf < -inf is false): the kernel takes mu capped where
+            # mu E*/G* = MU_EG_MAX, a limit no finite content reaches either (nothing slides,
+            # the same T and slip work; params.mu keeps the value given)
+            self._mu = min(self._mu, MU_EG_MAX / self._p[K.P_E_OVER_G])
         # cell work array: contents U, build rows A and B and, with friction only, the friction
         # work rows L (limits, edge release coefficients); U, A, B and L are views of it
         self.cells = np.zeros((K.work_rows(finite_mu), n))
@@ -283,6 +288,7 @@ class Drive(CellViews):
         """
         check_range("dt_tick", dt_tick, 0.0, _INF, lo_open=True, hi_open=True)
         n_sub = check_n_sub(n_sub)
+        self._check_state_valid()
         u = _as_ticks("omega_R", omega_R)
         k = u.shape[0]
         vv = _as_ticks("v", v, k)
@@ -328,7 +334,22 @@ class Drive(CellViews):
         return res
 
     def _check_flags(self):
-        check_flags(self.st)
+        try:
+            check_flags(self.st)
+        except (RuntimeError, FloatingPointError) as e:
+            raise type(e)(f"{e}; the drive's state is no longer valid (reset() it)") from None
+
+    def _check_state_valid(self):
+        """Before a run: a grid or non-finite flag that an earlier run stopped on means the
+        state is invalid, so it raises again, saying to reset().  The no-equilibrium flag
+        (massless runner) belongs to the inputs of the run that set it: cleared here, so that a
+        run whose contact does hold the load is not refused for an earlier one's."""
+        self.st[K.ST_FLAG] = float(int(self.st[K.ST_FLAG]) & ~K.FLAG_SLIDE)
+        try:
+            check_flags(self.st)
+        except (RuntimeError, FloatingPointError) as e:
+            raise type(e)(f"{e}; an earlier run stopped on this error and left the drive's "
+                          "state invalid: reset() the drive before running it again") from None
 
     def _check_finite(self, raw, res, dt_tick):
         """Every returned array and the state (ledger included) must be finite: a float
@@ -445,15 +466,12 @@ class Drive(CellViews):
 
 
 N_SUB_MAX = 10**9
+MU_EG_MAX = 1e300  # largest mu E*/G* the kernel takes (sums of limits over cells stay finite)
 
 
 def check_n_sub(n_sub) -> int:
     """Sub-steps per tick as an int in [1, N_SUB_MAX] (integral floats accepted)."""
-    ok = (not isinstance(n_sub, (bool, np.bool_)) and isinstance(n_sub, numbers.Real)
-          and 1 <= n_sub <= N_SUB_MAX and n_sub == int(n_sub))  # range first: no overflow
-    if not ok:
-        raise ValueError(f"n_sub must be an integer in [1, {N_SUB_MAX}], got {n_sub!r}")
-    return int(n_sub)
+    return check_int("n_sub", n_sub, 1, N_SUB_MAX)
 
 
 def _check_stroke(stroke) -> tuple[float, float]:

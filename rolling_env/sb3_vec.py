@@ -106,7 +106,7 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
         if attr_name == "max_episode_steps":
             value = check_time_limit(value, self.core.scene)
         elif attr_name == "target":  # the same check as reset(options={"target": ...})
-            value = target_option(self.core.scene, {"target": value})
+            value = target_option(self.core.scene, {"target": value}, name="target")
         elif attr_name == "steps":  # ticks into the episode: the env truncates at the limit
             limit = self.core.max_episode_steps
             if (isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
 
@@ -35,6 +36,17 @@ def check_range(name: str, value, lo: float, hi: float, *, lo_open: bool = False
         raise ValueError(f"{name} must be in {_range(lo, hi, lo_open, hi_open, allow_inf)}"
                          f"{extra}, got {x!r}")
     return x
+
+
+def check_int(name: str, value, lo: int, hi: int) -> int:
+    """Return ``int(value)`` or raise ValueError naming ``name`` and the allowed range
+    [lo, hi]: an integer (integral floats such as 2.0 accepted, never truncated: 2.5 is
+    refused), not a boolean, NaN, inf or None."""
+    ok = (isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+          and lo <= value <= hi and value == int(value))  # range first: no int(inf)
+    if not ok:
+        raise ValueError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}")
+    return int(value)
 
 
 def _range(lo, hi, lo_open, hi_open, allow_inf) -> str:

@@ -192,6 +192,58 @@ def test_staged_writes_are_all_or_none(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "b.png"]
 
 
+def test_ctrl_c_ends_a_long_compiled_run():
+    """One simulate of 1e9 sub-steps per tick is a single numba call, which never returns to
+    the interpreter to raise KeyboardInterrupt: Ctrl-C (SIGINT) left it running for minutes.
+    The CLI gives SIGINT the OS default while the command runs, so the process ends on it
+    (killed by SIGINT, not a KeyboardInterrupt traceback after the call)."""
+    import signal
+    import time
+    proc = subprocess.Popen([sys.executable, "-m", "rolling_env", "simulate", "--delta", "0.7",
+                             "--eps", "0.1", "--w", "2.5", "--omega-n-ratio", "5", "--n-sub",
+                             "1000000000", "--periods", "2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        time.sleep(6)  # imports done: the command (its compile or its kernel call) is running
+        assert proc.poll() is None, proc.communicate()
+        proc.send_signal(signal.SIGINT)
+        rc = proc.wait(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert rc == -signal.SIGINT, f"exit status {rc}: {proc.stderr.read().decode()[-500:]}"
+
+
+def test_ctrl_c_while_writing_still_removes_the_temporary_files(tmp_path):
+    """Where the CLI made SIGINT end the process, a file write switches KeyboardInterrupt
+    back on (io.interrupt_raises): Ctrl-C during a staged write removes its temporary files and
+    leaves the old file, and the CLI's setting is restored after the block.  Run in a child
+    process (the signal is sent to itself)."""
+    script = f"""
+import os, signal
+from pathlib import Path
+from rolling_env.cli import _ctrl_c_ends_the_process
+from rolling_env.io import staged, write_text
+out = Path({str(tmp_path)!r})
+write_text(out / "a.csv", "old a")
+with _ctrl_c_ends_the_process():
+    assert signal.getsignal(signal.SIGINT) is signal.SIG_DFL
+    try:
+        with staged():
+            write_text(out / "a.csv", "new a")
+            os.kill(os.getpid(), signal.SIGINT)
+            raise SystemExit("no KeyboardInterrupt")
+    except KeyboardInterrupt:
+        print("interrupted")
+    assert signal.getsignal(signal.SIGINT) is signal.SIG_DFL, "not restored after the block"
+print(sorted(p.name for p in out.iterdir()), (out / "a.csv").read_text())
+"""
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr[-1000:]
+    assert r.stdout.split() == ["interrupted", "['a.csv']", "old", "a"], r.stdout
+
+
 def test_rollout_writes_its_csv_and_plot_together(tmp_path, capsys):
     """A plot that cannot be written (its name taken by a folder) left the new CSV beside it,
     over an earlier rollout a new CSV beside an old plot: now neither changes (exit 2)."""

@@ -469,6 +469,7 @@ def test_vanishing_runner_mass_tends_to_massless():
     # refused because 10 x 5e-7 rounds below 5e-6: the message shows the bound that refuses it
     ({"target": 5e-6}, r"in \[-4.9999999999999996e-06, 4.9999999999999996e-06\] m .*got 5e-06"),
     ({"target": True}, r"options\['target'\] must be a number"),
+    ({"target": 10**400}, r"options\['target'\] .* got an integer too large for a float"),
     ({"target": float("nan")}, "finite displacement"),
     ({"targte": 1e-7}, r"unknown key\(s\) \['targte'\]"),
     ({"target": "3e-7"}, r"options\['target'\] must be a number"),
@@ -582,3 +583,25 @@ def test_scene_inputs_beyond_the_float_range_and_suffix_case(tmp_path):
     upper = tmp_path / "Mine.YAML"
     upper.write_text((SCENE_DIR / "resonant.yaml").read_text())
     assert rolling_env.make(str(upper)).unwrapped.scene.name == "resonant"
+
+
+def test_friction_coefficient_beyond_the_float_range_still_sticks():
+    """mu = 1.7e308 is a valid scene value whose mu E*/G* overflows to an inf friction limit:
+    nothing slips, and the stick fraction (observation 6 and the info) reads 1, as for mu =
+    1e300 (it read 0, 'all slipping', when the stick test compared -inf < -inf)."""
+    for mu in (1e300, 1.7e308):
+        env = gym.make("RollingDrive-v0", mu=mu)
+        env.reset(seed=0)
+        obs, _, _, _, info = env.step(np.array([1.0, 0.5, 0.5], np.float32))
+        assert info["slip_work"] == 0.0, (mu, info["slip_work"])
+        assert info["stick_fraction"] == 1.0 and obs[6] == 1.0, (mu, info["stick_fraction"])
+
+
+def test_a_scene_that_cannot_be_built_names_its_keys():
+    """A scene whose every key is in range but whose spring row would be too long (stroke 1 m
+    at 4096 cells per contact radius): the error names the scene and the keys behind the
+    drive's arguments, not only 'the stroke' and 'a_ref'."""
+    scene = load_scene("default", stroke_roll=0.5, resolution=4096.0)
+    with pytest.raises(ValueError, match=r"^scene 'default' cannot be built: .*cells.*"
+                                         r"stroke_roll = 0.5 m.*N_max.*resolution = 4096"):
+        gym.make("RollingDrive-v0", scene=scene)

@@ -278,6 +278,20 @@ def test_bad_dimensionless_inputs_rejected(args, name):
         ex.working_point(*args)
 
 
+@pytest.mark.parametrize("bad", [2.5, math.inf, math.nan, None, True, 10**20, 1])
+def test_run_lengths_are_integers_in_range(bad):
+    """mindlin's points and n_sub and working_point's periods take one integer check (n_sub
+    = 2.5 ran as 2; inf, NaN and None raised OverflowError / TypeError naming nothing; 10**20
+    points reached numpy's 'Maximum allowed size exceeded')."""
+    with pytest.raises(ValueError, match=r"^points must be an integer in \[2, 100000\]"):
+        ex.mindlin(0.3, points=bad, resolution=8)
+    with pytest.raises(ValueError, match=r"^periods must be an integer in \[2, 2000\]"):
+        ex.working_point(0.7, 0.1, 2.5, periods=bad)
+    if not (type(bad) is int and bad == 1):  # 1 sub-step is allowed
+        with pytest.raises(ValueError, match=r"^n_sub must be an integer in \[1, 1000000000\]"):
+            ex.mindlin(0.3, points=5, resolution=8, n_sub=bad)
+
+
 @pytest.mark.parametrize("call,match", [
     (lambda: ex.simulate(0.7, 0.1, 2.5, 0.5, n_sub=2.5, periods=4), r"^n_sub must be an integer"),
     (lambda: ex.simulate(0.7, 0.1, 2.5, 0.5, direction=True, periods=4),
@@ -476,6 +490,41 @@ def test_friction_limit_overflowing_to_inf_gives_no_slip():
                   d=np.array([d1, d1, 0.5 * d1, d1, 0.3 * d1, d1]))
     assert np.all(out["slip_work"] == 0.0), out["slip_work"]
     assert np.all(np.isfinite(out["T"])) and np.all(out["T"] != 0.0), out["T"]
+    # an inf limit holds every cell: the whole contact sticks (it read 0, "all slipping",
+    # when the stick test compared -inf < -inf)
+    assert np.all(out["stick_fraction"] >= 1.0 - 1e-12), out["stick_fraction"]
+
+
+def _flag_drive(m, F_ext):
+    drv = Drive(DriveParams(1e-3, 1e11, 1e11, mu=0.2, m=m, F_ext=F_ext), a_ref=1e-5,
+                resolution=4, stroke=(-1e-5, 1e-5), a_max=1e-5, t_ref=1e-4)
+    drv.reset()
+    return drv
+
+
+def test_a_run_after_a_grid_error_is_refused_until_reset():
+    """The contact leaving the spring row leaves the state invalid: the next run raises again
+    and says to reset(); after reset() the same drive runs."""
+    drv = _flag_drive(0.01, 0.0)
+    with pytest.raises(RuntimeError, match=r"left the spring row.*reset\(\)"):
+        drv.run(dt_tick=1e-3, n_sub=1, omega_R=[1.0], v=[1.0], N=[0.01])
+    still = dict(dt_tick=1e-5, n_sub=1, omega_R=[0.0], v=[0.0], N=[0.01])
+    with pytest.raises(RuntimeError, match=r"earlier run stopped on this error.*reset\(\)"):
+        drv.run(**still)
+    drv.reset()
+    out = drv.run(**still)
+    assert np.all(np.isfinite(out["T"])), "a reset drive must run again"
+
+
+def test_no_equilibrium_error_does_not_refuse_the_next_run():
+    """A massless runner's no-equilibrium error belongs to the run whose inputs caused it: a
+    later run whose contact holds the load (mu N = 2e-3 N > F_ext = 1e-3 N) succeeds and is in
+    force equilibrium (it raised the earlier run's error again, with this run's N)."""
+    drv = _flag_drive(0.0, 1e-3)
+    with pytest.raises(ValueError, match="no force equilibrium"):
+        drv.run(dt_tick=1e-5, n_sub=1, omega_R=[0.0], v=[0.0], N=[0.0])
+    out = drv.run(dt_tick=1e-5, n_sub=1, omega_R=[0.0, 0.0], v=[0.0, 0.0], N=[0.01, 0.01])
+    assert np.allclose(out["T"] + 1e-3, 0.0, rtol=0, atol=1e-12), out["T"]
 
 
 # ------------------------------------------------------------------- massless runner under load

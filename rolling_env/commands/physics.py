@@ -47,7 +47,7 @@ def register(sub):
                        "runner held and no rolling; compare T/(mu N) with the Cattaneo-Mindlin law.")
     p.add_argument("--mu", type=finite_float("mu", 0, ex.MINDLIN_MU_MAX, lo_open=True),
                    required=True)
-    p.add_argument("--points", type=positive_int("points", 2, 100000), default=21)
+    p.add_argument("--points", type=positive_int("points", 2, ex.MINDLIN_POINTS_MAX), default=21)
     p.add_argument("--resolution", type=finite_float("resolution", 2, 1e5),
                    default=ex.DEFAULT_RESOLUTION)
     p.add_argument("--json", action="store_true", help="print one JSON object")
