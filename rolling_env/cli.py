@@ -144,8 +144,9 @@ def _ctrl_c_ends_the_process():
     switch KeyboardInterrupt back on while they run (``io.interrupt_raises``), so Ctrl-C
     leaves no temporary file and never half a result.  Restored afterwards (``main`` also
     runs inside other programs, e.g. the tests)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+        yield  # ignored (a background job of a script, nohup) or someone else's handler
         return
     old = signal.signal(signal.SIGINT, signal.SIG_DFL)
     try:

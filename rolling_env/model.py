@@ -319,6 +319,10 @@ class Drive(CellViews):
                              f"a_max {self.grid.a_max * self.L0:.3e} m")
         ts = self.t0 / self.L0
         out = np.zeros((k, K.N_OUT))
+        # a massless loaded runner can meet a tick without force equilibrium: the error then
+        # leaves the drive as it was before this run (the kernel went on through every tick)
+        before = (self.get_state() if self._mass is not None and self._mass == 0.0
+                  and self._load is not None else None)
         done = K.run_ticks(self.cells, self.st, self._p,
                            dd / self.L0, u * ts, vv * ts, vs * ts,
                            self._mu, self._mass, self._load, int(n_sub),
@@ -327,8 +331,11 @@ class Drive(CellViews):
             self._check_flags()
         except ValueError as e:  # no force equilibrium: say with which numbers
             N_lo = float(hertz_force(dd.min(), self.params.R, self.params.E_star)) if k else 0.0
+            if before is not None:
+                self.U[:], self.st[:] = before
             raise ValueError(f"{e} (F_ext = {self.params.F_ext:g} N, mu = {self.params.mu:g}, "
-                             f"least normal force of this run N = {N_lo:.6g} N)") from None
+                             f"least normal force of this run N = {N_lo:.6g} N; the drive's "
+                             "state is as before this run)") from None
         res = self._to_si(out[:done])
         self._check_finite(out[:done], res, dt_tick)
         return res
@@ -367,6 +374,9 @@ class Drive(CellViews):
         if not np.all(np.isfinite(self.U)):
             bad.append("the cell deflections")
         if bad:
+            flag = self.st[K.ST_FLAG]
+            flag = int(flag) if math.isfinite(flag) else 0
+            self.st[K.ST_FLAG] = float(flag | K.FLAG_NONFINITE)  # next run: refused until reset
             raise FloatingPointError(
                 f"Drive.run overflowed the float range in {', '.join(bad)} (dt_tick = "
                 f"{dt_tick:g} s): reduce dt_tick, the rates omega_R, v, vstar or the load "

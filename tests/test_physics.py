@@ -521,8 +521,11 @@ def test_no_equilibrium_error_does_not_refuse_the_next_run():
     later run whose contact holds the load (mu N = 2e-3 N > F_ext = 1e-3 N) succeeds and is in
     force equilibrium (it raised the earlier run's error again, with this run's N)."""
     drv = _flag_drive(0.0, 1e-3)
-    with pytest.raises(ValueError, match="no force equilibrium"):
-        drv.run(dt_tick=1e-5, n_sub=1, omega_R=[0.0], v=[0.0], N=[0.0])
+    drv.run(dt_tick=1e-5, n_sub=1, omega_R=[0.1], v=[0.1], N=[0.01])  # a state to keep
+    U, st = drv.get_state()
+    with pytest.raises(ValueError, match="no force equilibrium.*state is as before this run"):
+        drv.run(dt_tick=1e-5, n_sub=1, omega_R=[0.1, 0.1], v=[0.1, 0.1], N=[0.01, 0.0])
+    assert np.array_equal(drv.U, U) and np.array_equal(drv.st, st), "the failed run moved it"
     out = drv.run(dt_tick=1e-5, n_sub=1, omega_R=[0.0, 0.0], v=[0.0, 0.0], N=[0.01, 0.01])
     assert np.allclose(out["T"] + 1e-3, 0.0, rtol=0, atol=1e-12), out["T"]
 
@@ -605,6 +608,11 @@ def test_overflow_in_a_run_raises_naming_it(params, run_kw, match):
     drv.reset()
     with pytest.raises(FloatingPointError, match=f"{match}.*reduce dt_tick"):
         drv.run(dt_tick=1e300, n_sub=1, omega_R=0.0, v=0.0, N=0.1, **run_kw)
+    # the state it left is not valid: the next run is refused until reset()
+    with pytest.raises(FloatingPointError, match=r"earlier run stopped.*reset\(\)"):
+        drv.run(dt_tick=1e-6, n_sub=1, omega_R=0.0, v=0.0, N=0.1, **run_kw)
+    drv.reset()
+    assert np.isfinite(drv.run(dt_tick=1e-6, n_sub=1, omega_R=0.0, v=0.0, N=0.1, **run_kw)["T"]).all()
 
 
 @pytest.mark.parametrize("kw, name", [(dict(G_star=1e-300), "E_star/G_star"),
