@@ -7,14 +7,13 @@ Bad arguments give a one-line error naming the parameter and exit code 2.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import importlib
 import json
 import math
 import re
-import signal
 import sys
-import threading
+
+from .io import interrupt_ends_process
 
 COMMAND_MODULES = ["physics", "figures", "converge", "stability", "bench", "rollout"]
 
@@ -136,30 +135,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-@contextlib.contextmanager
-def _ctrl_c_ends_the_process():
-    """SIGINT with the OS default action for the command: Ctrl-C then ends a long compiled
-    kernel call too (numba code never returns to the interpreter, so KeyboardInterrupt would
-    wait for the call's end: a simulate of 1e9 sub-steps ran on for minutes).  File writes
-    switch KeyboardInterrupt back on while they run (``io.interrupt_raises``), so Ctrl-C
-    leaves no temporary file and never half a result.  Restored afterwards (``main`` also
-    runs inside other programs, e.g. the tests)."""
-    if (threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
-        yield  # ignored (a background job of a script, nohup) or someone else's handler
-        return
-    old = signal.signal(signal.SIGINT, signal.SIG_DFL)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, old)
-
-
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        with _ctrl_c_ends_the_process():
+        # Ctrl-C ends the command, also inside a long compiled kernel call (the files it
+        # writes are written whole or not at all, see rolling_env.io)
+        with interrupt_ends_process():
             return int(args.func(args) or 0)
     except (ValueError, OSError) as e:  # validation errors from the library, or an output
         # path that cannot be written (--out names a file, no permission): one line, exit 2

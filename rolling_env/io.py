@@ -23,20 +23,33 @@ _STAGE: contextvars.ContextVar[list | None] = contextvars.ContextVar("_STAGE", d
 
 
 @contextlib.contextmanager
-def interrupt_raises():
-    """Ctrl-C raises KeyboardInterrupt inside the block even where the caller made SIGINT
-    end the process (the CLI does, so that Ctrl-C stops a long compiled kernel call, which
-    never returns to the interpreter to raise): the writes below then remove their
-    temporary files on Ctrl-C instead of leaving them behind.  A no-op elsewhere."""
+def _sigint_swapped(expected, handler):
+    """SIGINT handled by ``handler`` for the block where it is ``expected`` now (and this is
+    the main thread, the only one that may set handlers); ``expected`` again after it."""
     if (threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(signal.SIGINT) is not signal.SIG_DFL):
-        yield
+            or signal.getsignal(signal.SIGINT) is not expected):
+        yield  # e.g. SIGINT ignored (a script's background job) or someone else's handler
         return
-    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGINT, handler)
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        signal.signal(signal.SIGINT, expected)
+
+
+def interrupt_ends_process():
+    """Ctrl-C ends the process inside the block (the OS default for SIGINT), also in the
+    middle of a long compiled kernel call, which never returns to the interpreter to raise
+    KeyboardInterrupt (a simulate of 1e9 sub-steps ran on for minutes).  The CLI runs its
+    commands so; the writes below switch KeyboardInterrupt back on (``interrupt_raises``)."""
+    return _sigint_swapped(signal.default_int_handler, signal.SIG_DFL)
+
+
+def interrupt_raises():
+    """Ctrl-C raises KeyboardInterrupt inside the block even within ``interrupt_ends_process``:
+    the writes below then remove their temporary files on Ctrl-C instead of leaving them
+    behind.  A no-op elsewhere."""
+    return _sigint_swapped(signal.SIG_DFL, signal.default_int_handler)
 
 
 def atomic_write(path: str | os.PathLike, writer) -> Path:

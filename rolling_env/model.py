@@ -340,11 +340,13 @@ class Drive(CellViews):
         self._check_finite(out[:done], res, dt_tick)
         return res
 
-    def _check_flags(self):
+    def _check_flags(self, hint="the drive's state is no longer valid (reset() it)"):
+        """``check_flags`` of the state; a grid or non-finite error (an invalid state) gets
+        ``hint`` appended."""
         try:
             check_flags(self.st)
         except (RuntimeError, FloatingPointError) as e:
-            raise type(e)(f"{e}; the drive's state is no longer valid (reset() it)") from None
+            raise type(e)(f"{e}; {hint}") from None
 
     def _check_state_valid(self):
         """Before a run: a grid or non-finite flag that an earlier run stopped on means the
@@ -352,11 +354,8 @@ class Drive(CellViews):
         (massless runner) belongs to the inputs of the run that set it: cleared here, so that a
         run whose contact does hold the load is not refused for an earlier one's."""
         self.st[K.ST_FLAG] = float(int(self.st[K.ST_FLAG]) & ~K.FLAG_SLIDE)
-        try:
-            check_flags(self.st)
-        except (RuntimeError, FloatingPointError) as e:
-            raise type(e)(f"{e}; an earlier run stopped on this error and left the drive's "
-                          "state invalid: reset() the drive before running it again") from None
+        self._check_flags("an earlier run stopped on this error and left the drive's state "
+                          "invalid: reset() the drive before running it again")
 
     def _check_finite(self, raw, res, dt_tick):
         """Every returned array and the state (ledger included) must be finite: a float

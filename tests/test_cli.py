@@ -230,11 +230,10 @@ def test_ctrl_c_while_writing_still_removes_the_temporary_files(tmp_path):
     script = f"""
 import os, signal
 from pathlib import Path
-from rolling_env.cli import _ctrl_c_ends_the_process
-from rolling_env.io import staged, write_text
+from rolling_env.io import interrupt_ends_process, staged, write_text
 out = Path({str(tmp_path)!r})
 write_text(out / "a.csv", "old a")
-with _ctrl_c_ends_the_process():
+with interrupt_ends_process():
     assert signal.getsignal(signal.SIGINT) is signal.SIG_DFL
     try:
         with staged():
