@@ -469,18 +469,19 @@ def report(res) -> str:
           "Every timed pass spans whole episodes, so each holds the resets at the rate "
           "training meets them: the batched passes reset every env once per episode, the "
           "single env's pass of many episodes its own.", "",
-          "| | aggregate env steps/s | vs single env (target >= 10x) |", "|---|---|---|",
-          f"| single env (gym.make) | {b['single']:,.0f} | 1.0x |",
+          "| | aggregate env steps/s | vs single env (target >= 10x; two decimals, so that "
+          "9.96x does not read as 10.0x) |", "|---|---|---|",
+          f"| single env (gym.make) | {b['single']:,.0f} | 1.00x |",
           f"| batched core, serial kernel | {b['serial']:,.0f} | "
-          f"{b['serial'] / b['single']:.1f}x |",
+          f"{b['serial'] / b['single']:.2f}x |",
           f"| batched core, threaded kernel (prange) on 1 thread | {b['threaded_1']:,.0f} | "
-          f"{b['threaded_1'] / b['single']:.1f}x |",
+          f"{b['threaded_1'] / b['single']:.2f}x |",
           f"| batched core, threaded kernel (prange, {b['threads']} threads) | "
-          f"{b['threaded']:,.0f} | {b['threaded'] / b['single']:.1f}x |",
+          f"{b['threaded']:,.0f} | {b['threaded'] / b['single']:.2f}x |",
           f"| `gym.make_vec(\"RollingDrive-v0\", num_envs={n})` | {b['gym_vector']:,.0f} | "
-          f"{b['gym_vector'] / b['single']:.1f}x |",
+          f"{b['gym_vector'] / b['single']:.2f}x |",
           f"| SB3 `RollingDriveVecEnv({n})` | {b['sb3_vecenv']:,.0f} | "
-          f"{b['sb3_vecenv'] / b['single']:.1f}x |",
+          f"{b['sb3_vecenv'] / b['single']:.2f}x |",
           "", "Where prange pays (batched core, aggregate env steps/s):", "",
           "| envs | serial kernel | threaded kernel | threaded / serial |", "|---|---|---|---|"]
     L += [f"| {r['num_envs']} | {r['serial']:,.0f} | {r['threaded']:,.0f} | "
@@ -563,8 +564,8 @@ def _ratio_bound(b) -> list:
             f"with a batch of one) and {r['python_us']:.2f} us the Python layer (gym.make's "
             "wrappers, action check, info dict, kernel dispatch) that batching removes.  With "
             f"{b['threads']} threads scaling perfectly on the faster one-thread kernel "
-            f"({1e6 / one:.2f} us per env-step), batching reaches at most {r['bound']:.1f}x; "
-            f"measured {got:.1f}x ({eff:.0%} of that bound).  "
+            f"({1e6 / one:.2f} us per env-step), batching reaches at most {r['bound']:.2f}x; "
+            f"measured {got:.2f}x ({eff:.0%} of that bound).  "
             + (f"{r['target']:.0f}x is reached." if got >= r["target"] else
                f"At that efficiency {r['target']:.0f}x needs a physics tick {f_eff:.2f}x as "
                "fast at the same accuracy (a faster tick also speeds up the single env); with "

@@ -177,11 +177,16 @@ def test_commit_of_every_cell_matches_a_plain_reference(i0, i1, j0, j1, mass):
     W[K.W_B, 7] = 0.5
     dxdt, s, inv_dx = 0.4, 1.7, 2.0
     want_W, want = _commit_reference(W, i0, i1, j0, j1, dxdt, s, inv_dx, mass)
-    got = K._commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, 0.2, mass, True)
+    W_nl = W.copy()
+    got = K._commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, 0.2, mass, True, True)
     np.testing.assert_array_equal(W[K.W_U], want_W[K.W_U],
                                   err_msg="committed contents differ from the plain loop")
     np.testing.assert_array_equal(W[1:], want_W[1:], err_msg="commit changed a row it only reads")
     assert got[3] == want[3], f"clipped flag {got[3]}, plain loop {want[3]}"
+    # without the ledger (the env) the same commit, with no clipped flag computed
+    got_nl = K._commit(W_nl, i0, i1, j0, j1, dxdt, s, inv_dx, 0.2, mass, True, None)
+    np.testing.assert_array_equal(W_nl, W, err_msg="commit without the ledger differs")
+    assert got_nl[:3] == got[:3] and got_nl[3] is False, f"{got_nl} vs {got}"
     for name, g, w in zip(("T1", "Ta", "slip"), got[:3], want[:3]):
         assert g == pytest.approx(w, rel=1e-13, abs=1e-300), f"{name} = {g}, plain loop {w}"
     U, L = want_W[K.W_U, i0:i1 + 1], want_W[K.W_L + K.L_LIMIT, i0:i1 + 1]
@@ -193,9 +198,10 @@ def test_commit_of_every_cell_matches_a_plain_reference(i0, i1, j0, j1, mass):
         assert n_pos > 0 and n_neg > 0, f"slid: {n_pos} positive, {n_neg} negative"
 
 
+@pytest.mark.parametrize("ledger", [True, None])
 @pytest.mark.parametrize("edges", [True, None])
 @pytest.mark.parametrize("where", [0, 5, 10])  # first cell, middle, last (scalar remainder)
-def test_commit_keeps_a_nan_content(edges, where):
+def test_commit_keeps_a_nan_content(edges, where, ledger):
     """A NaN content (a blown-up cell) stays NaN through the clip to the friction limit and
     reaches T1, so that the tick's non-finite check sees it: the clip's min/max must not
     replace it with a limit.  Cells 0..10, with the inner cells 3..8 (edges) or all of them
@@ -209,12 +215,13 @@ def test_commit_keeps_a_nan_content(edges, where):
     W[K.W_A] = 2.0  # every other cell beyond its limit: the clip is exercised
     W[K.W_A, where] = np.nan
     j0, j1 = (3, 8) if edges else (0, n - 1)
-    T1, Ta, _slip, clipped = K._commit(W, 0, n - 1, j0, j1, 0.4, 0.3, 2.0, 0.2, 1.0, edges)
+    T1, Ta, _slip, clipped = K._commit(W, 0, n - 1, j0, j1, 0.4, 0.3, 2.0, 0.2, 1.0, edges,
+                                       ledger)
     assert math.isnan(W[K.W_U, where]), f"cell {where} committed {W[K.W_U, where]}, not NaN"
     assert math.isnan(T1) and math.isnan(Ta), f"T1 = {T1}, Ta = {Ta}: the NaN was lost"
     others = np.delete(W[K.W_U], where)
     np.testing.assert_array_equal(others, 1.0, err_msg="the other cells not clipped to +1")
-    assert clipped, "no cell reported as slid"
+    assert clipped == (ledger is not None), f"clipped = {clipped} with ledger = {ledger}"
 
 
 def test_kernels_compile_without_reference_counting():
@@ -274,6 +281,37 @@ def test_env_path_matches_the_ledger_path(scene):
     stick = np.abs(env[:, K.OUT_STICK] - ref[:, K.OUT_STICK])
     assert stick.max() <= 0.2 and stick.mean() <= 1e-3, (
         f"{scene}: stuck fraction differs by up to {stick.max():.3f}, mean {stick.mean():.1e}")
+
+
+@pytest.mark.parametrize("mu", [0.3, None])
+def test_load_drop_without_the_ledger_leaves_only_the_ledger_out(mu):
+    """``_set_radius`` without the ledger (the env) gives the same contents, T and slip work
+    as with it, bit for bit, and leaves out only the ledger's energies (release and snap),
+    which the ledger records on the same drop: a contact shrinking from a = 3 to 2 cells'
+    width over stressed contents (above the new friction limits with friction)."""
+    n = 40
+    p = np.array([50.0, 1.2, -10.0, 0.5])  # R, E*/G*, x_lo, dx
+    a_old, a_new = 3.0, 2.0
+    d_old, d_new = a_old ** 2 / p[K.P_R], a_new ** 2 / p[K.P_R]
+    base = np.zeros((K.work_rows(mu is not None), n))
+    i0, i1 = K._contact_range(0.1, a_old, p[K.P_X_LO], p[K.P_DX], n)
+    base[K.W_U, i0:i1 + 1] = np.linspace(-0.2, 0.3, i1 - i0 + 1)
+    res = {}
+    for ledger in (True, None):
+        W = base.copy()
+        st = np.zeros(K.N_STATE)
+        st[[K.ST_C, K.ST_A, K.ST_D]] = 0.1, a_old, d_old
+        slip = K._set_radius(W, st, p, a_new, d_new, mu, ledger)
+        res[ledger] = W, st, slip
+    (W1, st1, slip1), (W0, st0, slip0) = res[True], res[None]
+    np.testing.assert_array_equal(W0, W1, err_msg="contents differ without the ledger")
+    assert slip0 == slip1 and st0[K.ST_SLIP] == st1[K.ST_SLIP], f"slip {slip0} vs {slip1}"
+    assert st0[K.ST_T] == st1[K.ST_T], f"T {st0[K.ST_T]} vs {st1[K.ST_T]}"
+    assert st1[K.ST_REL] > 0.0, "the ledger recorded no released energy on the drop"
+    if mu is not None:
+        assert slip1 > 0.0 and st1[K.ST_SNAP] > 0.0, (
+            f"no slip ({slip1}) or snap ({st1[K.ST_SNAP]}): the case does not exceed the limits")
+    assert st0[K.ST_REL] == 0.0 and st0[K.ST_SNAP] == 0.0, "the env path wrote ledger energies"
 
 
 @pytest.mark.parametrize("ticks_per_period", [2, 3, 7, 8, 1000])
