@@ -13,10 +13,10 @@ transitions are bit-identical to N single envs).  Two thin adapters:
 
 Seeding follows Gymnasium: env i of a batch seeded s behaves like a single env seeded s + i.
 The threaded kernel (``prange``) is used from ``PARALLEL_MIN_ENVS`` envs on: measured on the
-2-core machine (default scene, ``rolling-drive bench``, results/benchmarks.md, eleven runs of
-2026-11-24's twelfth session) it is 0.57-0.68x the serial kernel at 1 env, 0.74-0.85x at 2,
-0.90-1.06x at 4, 1.27-1.49x at 16 and 1.72-2.08x at 256, where the second core gives about
-2x.
+2-core machine (default scene, ``rolling-drive bench``'s batch-size table, nine runs of
+2026-11-24's fourteenth session) it is 0.61-0.64x the serial kernel at 1 env, 0.94-0.98x at
+4 (0.95-0.96x at 5, measured separately with the same passes), 1.05-1.10x at 6, 1.16-1.20x
+at 8 and 1.66-1.89x at 256, where the second core gives about 1.9x.
 """
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ from .env import (OBS_NAMES, build_drive, check_action_dtype, check_actions, che
 from .model import CellViews
 from .scenes import load_scene
 
-PARALLEL_MIN_ENVS = 4
+PARALLEL_MIN_ENVS = 6
 
 __all__ = ["BatchCore", "RollingDriveVectorEnv", "RollingDriveVecEnv", "make_vector_env",
            "PARALLEL_MIN_ENVS"]

@@ -10,7 +10,8 @@ import pytest
 
 import rolling_env
 import rolling_env._envkernel as EK
-from rolling_env.vector import BatchCore, RollingDriveVecEnv, RollingDriveVectorEnv
+from rolling_env.vector import (PARALLEL_MIN_ENVS, BatchCore, RollingDriveVecEnv,
+                                RollingDriveVectorEnv)
 
 N = 4
 STEPS = 40  # with max_episode_steps = 15: crosses two episode boundaries
@@ -128,7 +129,8 @@ def test_step_returns_the_kernels_reward_and_truncation_as_copies(num_envs):
     numpy, also after the limit changes mid-episode (SB3's set_attr does that) and for envs
     reset at different times; and as copies that the next step does not overwrite."""
     core = BatchCore(num_envs, max_episode_steps=12)
-    assert core._step_fn is (EK.env_step_parallel if num_envs >= 4 else EK.env_step_serial)
+    assert core._step_fn is (EK.env_step_parallel if num_envs >= PARALLEL_MIN_ENVS
+                             else EK.env_step_serial)
     core.seed(3)
     core.reset()
     kept = []
