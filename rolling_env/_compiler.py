@@ -6,8 +6,9 @@ remainder of up to 3 cells, so most of each loop is its tail, and the tail's tri
 from sub-step to sub-step (branches the predictor misses).  With LLVM's options
 ``-prefer-predicate-over-epilogue=predicate-else-scalar-epilogue`` and
 ``-force-vector-interleave=1`` a loop runs 8-wide with the last iteration masked (AVX-512
-mask registers) and no remainder: the serial batched kernel is about 5% faster on the
-project's machine (AMD EPYC Zen 4; default scene, 256 envs; README, performance).
+mask registers) and no remainder: the serial batched kernel is about 3% faster on the
+default and loaded scenes and 2% on resonant on the project's machine (AMD EPYC Zen 4, 256
+envs; docs/performance-log.md, eleventh session).
 
 These are process-wide LLVM command-line options (llvmlite's ``set_option``; numba has no
 per-function switch).  ``Compiler`` sets them only while it compiles one of our kernels and

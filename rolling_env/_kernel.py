@@ -49,7 +49,7 @@ Compiler options (``JIT``, for every kernel here and in ``_envkernel``):
 * ``pipeline_class=_compiler.Compiler``: numba's default pipeline, compiled with LLVM's
   predicated loop tails where the CPU has AVX-512 (the cell loops run 8 cells wide with a
   masked last iteration instead of a 16-wide body, a 4-wide epilogue and a scalar remainder:
-  about 5% of the env step); the options are set only while our kernels compile (see
+  2-3% of the env step); the options are set only while our kernels compile (see
   ``_compiler``).
 """
 from __future__ import annotations

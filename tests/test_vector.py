@@ -13,24 +13,32 @@ import rolling_env._envkernel as EK
 from rolling_env.vector import (PARALLEL_MIN_ENVS, BatchCore, RollingDriveVecEnv,
                                 RollingDriveVectorEnv)
 
-N = 4
 STEPS = 40  # with max_episode_steps = 15: crosses two episode boundaries
+# batch sizes that take the serial and the threaded kernel (``PARALLEL_MIN_ENVS``)
+KERNELS = pytest.mark.parametrize("n", [3, PARALLEL_MIN_ENVS], ids=["serial", "threaded"])
 
 
-def _actions(seed, n=N, steps=STEPS):
+def _kernel_of(core, n):
+    want = EK.env_step_parallel if n >= PARALLEL_MIN_ENVS else EK.env_step_serial
+    assert core._step_fn is want, f"{n} envs step with {core._step_fn.__name__}"
+
+
+def _actions(seed, n, steps=STEPS):
     return np.random.default_rng(seed).uniform(-1, 1, (steps, n, 3)).astype(np.float32)
 
 
+@KERNELS
 @pytest.mark.parametrize("scene", ["default", "resonant", "heavy_inf_friction", "loaded"])
-def test_gymnasium_vector_env_matches_single_envs(scene):
-    venv = gym.make_vec("RollingDrive-v0", num_envs=N, vectorization_mode="vector_entry_point",
+def test_gymnasium_vector_env_matches_single_envs(scene, n):
+    venv = gym.make_vec("RollingDrive-v0", num_envs=n, vectorization_mode="vector_entry_point",
                         scene=scene, max_episode_steps=15)
-    singles = [gym.make("RollingDrive-v0", scene=scene, max_episode_steps=15) for _ in range(N)]
+    _kernel_of(venv.unwrapped.core, n)
+    singles = [gym.make("RollingDrive-v0", scene=scene, max_episode_steps=15) for _ in range(n)]
     vobs, _ = venv.reset(seed=7)
     sobs = np.stack([e.reset(seed=7 + i)[0] for i, e in enumerate(singles)])
     assert np.array_equal(vobs, sobs), "reset observations differ"
-    done = np.zeros(N, bool)
-    for acts in _actions(1):
+    done = np.zeros(n, bool)
+    for acts in _actions(1, n):
         vobs, vrew, vterm, vtrunc, _ = venv.step(acts)
         for i, e in enumerate(singles):
             if done[i]:  # NEXT_STEP autoreset: this step resets env i
@@ -44,15 +52,17 @@ def test_gymnasium_vector_env_matches_single_envs(scene):
     assert venv.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
 
 
+@KERNELS
 @pytest.mark.parametrize("scene", ["default", "light_stiff"])
-def test_sb3_vecenv_matches_single_envs(scene):
-    venv = RollingDriveVecEnv(N, scene=scene, max_episode_steps=15)
+def test_sb3_vecenv_matches_single_envs(scene, n):
+    venv = RollingDriveVecEnv(n, scene=scene, max_episode_steps=15)
+    _kernel_of(venv.core, n)
     venv.seed(3)
     vobs = venv.reset()
-    singles = [gym.make("RollingDrive-v0", scene=scene, max_episode_steps=15) for _ in range(N)]
+    singles = [gym.make("RollingDrive-v0", scene=scene, max_episode_steps=15) for _ in range(n)]
     sobs = np.stack([e.reset(seed=3 + i)[0] for i, e in enumerate(singles)])
     assert np.array_equal(vobs, sobs)
-    for acts in _actions(2):
+    for acts in _actions(2, n):
         vobs, vrew, vdone, infos = venv.step(acts)
         for i, e in enumerate(singles):
             o, r, te, tr, info = e.step(acts[i])
