@@ -423,10 +423,13 @@ def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path) -> Path:
 def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m agents.evaluate",
                                 description=__doc__.splitlines()[0])
-    p.add_argument("--scenes", nargs="+", default=rolling_env.list_scenes())
+    p.add_argument("--scenes", nargs="+", default=rolling_env.list_scenes(),
+                   help="scene names or YAML paths (default: every shipped scene)")
     p.add_argument("--runs", default="runs", help="folder of training runs (<runs>/<scene>/<run>/)")
     p.add_argument("--episodes", type=int, default=20, help="held-out targets per scene")
-    p.add_argument("--out", default="results")
+    p.add_argument("--out", default="results",
+                   help="output folder of comparison.md, .csv and plots/ (default results, "
+                        "relative to the current directory)")
     p.add_argument("--baselines-only", action="store_true",
                    help="compare the two Eq. 32 baselines alone (no --runs needed); without it "
                         "every scene must have a trained agent under <runs>/<scene key>/")

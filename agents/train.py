@@ -118,7 +118,10 @@ def _setup(args):
     from stable_baselines3.common.vec_env import VecNormalize
 
     scene = args.scene
-    buildable_scene(scene)  # the scene checked, and that it builds (a one-line error if not)
+    try:  # the scene checked, and that it builds (a one-line error naming the flag if not)
+        buildable_scene(scene)
+    except ValueError as e:
+        raise ValueError(f"--scene: {e}") from None
     key = scene_key(scene)
     hp = load_hyperparams(args.algo, key, args.conf)
     if args.n_timesteps is None and "n_timesteps" not in hp:

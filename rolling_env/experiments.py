@@ -238,10 +238,14 @@ OMEGA_N_RATIO_RANGE = (1e-100, 1e100)  # finite nonzero r: m stays a finite posi
 
 def check_omega_n_ratio(r) -> float:
     """omega_n / Omega: 0 (infinitely heavy runner), inf (massless) or a finite value inside
-    ``OMEGA_N_RATIO_RANGE``; anything else raises ValueError naming the range."""
-    r = check_range("omega_n_ratio", r, 0.0, math.inf, allow_inf=True)
+    ``OMEGA_N_RATIO_RANGE``; anything else raises one ValueError naming all three."""
     lo, hi = OMEGA_N_RATIO_RANGE
-    if r != 0.0 and math.isfinite(r) and not lo <= r <= hi:
+    try:
+        r = check_range("omega_n_ratio", r, 0.0, math.inf, allow_inf=True)
+        ok = r == 0.0 or not math.isfinite(r) or lo <= r <= hi
+    except ValueError:
+        ok = False
+    if not ok:
         raise ValueError(f"omega_n_ratio must be 0 (infinitely heavy runner), inf (massless) "
                          f"or in [{lo:g}, {hi:g}], got {r!r}")
     return r

@@ -123,7 +123,8 @@ def controller_label(name: str) -> str:
 
 
 def make_controller(name: str, env, seed=0, scene=None):
-    """``random``, ``zero``, ``eq32``, ``eq32-feedback`` or a path to an SB3 model .zip
+    """``random``, ``zero``, ``eq32`` (or ``eq32-open-loop``, its name in ``agents.evaluate``'s
+    tables), ``eq32-feedback`` or a path to an SB3 model .zip
     (trained by ``agents.train``; its VecNormalize statistics are applied if present).  A
     model whose run folder's config.yml says it was trained on another scene than ``scene``
     (as given: name or path; default the env's scene, compared by content) is refused."""
@@ -131,14 +132,14 @@ def make_controller(name: str, env, seed=0, scene=None):
         return RandomController(env.action_space, seed)
     if name == "zero":
         return ZeroController()
-    if name in ("eq32", "eq32-feedback"):
+    if name in ("eq32", "eq32-open-loop", "eq32-feedback"):
         from agents import baselines
-        cls = baselines.Eq32OpenLoop if name == "eq32" else baselines.Eq32Feedback
+        cls = baselines.Eq32Feedback if name == "eq32-feedback" else baselines.Eq32OpenLoop
         return cls.from_env(env)
     if name.endswith(".zip") and Path(name).exists():
         from agents.evaluate import check_run_scene, load_agent
         check_run_scene(Path(name).parent, env.unwrapped.scene if scene is None else scene,
                         by_key=False)  # by content: a copy of a scene under another name is fine
         return load_agent(name, env)
-    raise ValueError(f"controller must be random, zero, eq32, eq32-feedback or an existing "
-                     f"model .zip, got {name!r}")
+    raise ValueError(f"controller must be random, zero, eq32 (or eq32-open-loop), "
+                     f"eq32-feedback or an existing model .zip, got {name!r}")

@@ -315,8 +315,25 @@ def test_train_bad_scene_leaves_no_run_folder(tmp_path, capsys):
     from agents.train import main as train_main
     assert train_main(["--algo", "ppo", "--scene", "bogus", "--run-dir",
                        str(tmp_path / "run")]) == 2
-    assert "unknown scene 'bogus'" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "--scene: unknown scene 'bogus'" in err, err
     assert not (tmp_path / "run").exists(), "config.yml written before the scene was checked"
+
+
+def test_rollout_takes_the_open_loop_baseline_by_its_table_name():
+    """``eq32-open-loop`` (the name in agents.evaluate's tables) is the same controller as
+    ``eq32``: the same class and an identical 40-step rollout."""
+    from rolling_env.rollout import make_controller
+    data = {}
+    for name in ("eq32", "eq32-open-loop"):
+        env = rolling_env.make("default")
+        ctrl = make_controller(name, env)
+        assert isinstance(ctrl, Eq32OpenLoop), f"{name}: {type(ctrl).__name__}"
+        data[name] = rollout(env, ctrl, seed=5, max_steps=40)
+    a, b = data["eq32"], data["eq32-open-loop"]
+    assert a.keys() == b.keys()
+    for k in a:
+        np.testing.assert_array_equal(np.asarray(a[k]), np.asarray(b[k]), err_msg=k)
 
 
 @pytest.mark.filterwarnings("ignore:You have specified a mini-batch size")

@@ -13,7 +13,8 @@ def register(sub):
                        "work_precision.csv and .png (work_precision_quick.* with --quick) with "
                        "the observed orders, and print the speed-up over the naive row at equal "
                        "error.")
-    p.add_argument("--out", type=folder_path("out"), default="results", help="output folder (default results)")
+    p.add_argument("--out", type=folder_path("out"), default="results",
+                   help="output folder (default results, relative to the current directory)")
     p.add_argument("--quick", action="store_true",
                    help="a smaller, faster subset (writes work_precision_quick.*)")
     p.add_argument("--json", action="store_true", help="print one JSON object")

@@ -11,7 +11,7 @@ def register(sub):
                        "0.5; w 2.2 and 10) and write PNG + CSV under --out; print the largest "
                        "deviation of each simulated zero line from Eq. 29 / Eq. 32.")
     p.add_argument("--out", type=folder_path("out"), default="results/paper",
-                   help="output folder (default results/paper)")
+                   help="output folder (default results/paper, relative to the current directory)")
     p.add_argument("--points", type=positive_int("points", 5, 401), default=41,
                    help="grid points per axis of the maps (default 41)")
     p.add_argument("--resolution", type=finite_float("resolution", 2, 1e5), default=32.0,

@@ -12,12 +12,14 @@ def register(sub):
                        "write the trajectory to CSV and a PNG plot.")
     p.add_argument("--scene", default="default", help="scene name or YAML path (default: default)")
     p.add_argument("--controller", default="eq32-feedback",
-                   help="random | zero | eq32 | eq32-feedback | path/to/model.zip")
+                   help="random | zero | eq32 (also eq32-open-loop, its name in "
+                   "agents.evaluate's tables) | eq32-feedback | path/to/model.zip")
     p.add_argument("--seed", type=positive_int("seed", 0, 2**31 - 1), default=0)
     p.add_argument("--target", type=finite_float("target"), default=None, help="target displacement [m] "
                    "(default: drawn from the scene's range with the seed)")
     p.add_argument("--out", type=folder_path("out"), default="results/rollouts",
-                   help="output folder")
+                   help="output folder (default results/rollouts, relative to the current "
+                   "directory)")
     p.add_argument("--frame", action="store_true", help="also save the final rendered frame")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_run)
@@ -29,7 +31,10 @@ def _run(args):
 
     from ..env import target_option
 
-    env = rolling_env.make(args.scene, render_mode="rgb_array" if args.frame else None)
+    try:
+        env = rolling_env.make(args.scene, render_mode="rgb_array" if args.frame else None)
+    except ValueError as e:  # an unknown scene or a bad scene file
+        raise ValueError(f"--scene: {e}") from None
     asked = None if args.target is None else {"target": args.target}
     try:  # the scene's target range, named as the argument the user gave
         target_option(env.unwrapped.scene, asked)

@@ -14,8 +14,9 @@ def register(sub):
                        "case, tolerances stated in it) and print it.  Exit code 1 if any case "
                        "fails.")
     p.add_argument("--out", type=file_path("out"), default="results/stability.md",
-                   help="report path (default results/stability.md; with --quick the report "
-                   "is only printed unless --out is given)")
+                   help="report path (default results/stability.md, relative to the current "
+                   "directory; with --quick the report is only printed unless --out is "
+                   "given)")
     p.add_argument("--quick", action="store_true", help="a smaller, faster subset")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_run)
