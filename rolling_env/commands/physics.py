@@ -46,7 +46,9 @@ def register(sub):
                    default=0.02, help="a1/R (matters with finite friction; default 0.02)")
     p.add_argument("--g-over-e", type=finite_float("g-over-e", 0, 10, lo_open=True),
                    default=ex.Geometry().g_over_e, help="G*/E* (default 0.824, nu = 0.3)")
-    p.add_argument("--periods", type=positive_int("periods", 2, 10**7), default=40)
+    p.add_argument("--periods", type=positive_int("periods", 2, 10**7), default=40,
+                   help="excitation periods to simulate (default 40; the mean runner velocity "
+                   "is taken over the second half)")
     p.add_argument("--resolution", type=finite_float("resolution", 2, 1e5),
                    default=ex.DEFAULT_RESOLUTION, help="springs per contact radius a1")
     p.add_argument("--n-sub", type=positive_int("n-sub"), default=None,
@@ -58,10 +60,13 @@ def register(sub):
                        description="Press the sphere, then displace it tangentially with the "
                        "runner held and no rolling; compare T/(mu N) with the Cattaneo-Mindlin law.")
     p.add_argument("--mu", type=finite_float("mu", 0, ex.MINDLIN_MU_MAX, lo_open=True),
-                   required=True)
-    p.add_argument("--points", type=positive_int("points", 2, ex.MINDLIN_POINTS_MAX), default=21)
+                   required=True, help="friction coefficient")
+    p.add_argument("--points", type=positive_int("points", 2, ex.MINDLIN_POINTS_MAX), default=21,
+                   help="tangential displacements compared, up to 1.2 u* (full sliding; "
+                   "default 21)")
     p.add_argument("--resolution", type=finite_float("resolution", 2, 1e5),
-                   default=ex.DEFAULT_RESOLUTION)
+                   default=ex.DEFAULT_RESOLUTION,
+                   help=f"springs per contact radius (default {ex.DEFAULT_RESOLUTION:g})")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_mindlin)
 
