@@ -240,15 +240,17 @@ def check_omega_n_ratio(r) -> float:
     """omega_n / Omega: 0 (infinitely heavy runner), inf (massless) or a finite value inside
     ``OMEGA_N_RATIO_RANGE``; anything else raises one ValueError naming all three."""
     lo, hi = OMEGA_N_RATIO_RANGE
+    allowed = (f"omega_n_ratio must be 0 (infinitely heavy runner), inf (massless) or in "
+               f"[{lo:g}, {hi:g}]")
     try:
-        r = check_range("omega_n_ratio", r, 0.0, math.inf, allow_inf=True)
-        ok = r == 0.0 or not math.isfinite(r) or lo <= r <= hi
-    except ValueError:
-        ok = False
-    if not ok:
-        raise ValueError(f"omega_n_ratio must be 0 (infinitely heavy runner), inf (massless) "
-                         f"or in [{lo:g}, {hi:g}], got {r!r}")
-    return r
+        x = check_range("omega_n_ratio", r, 0.0, math.inf, allow_inf=True)
+    except ValueError as e:
+        if "must be a number" in str(e):  # not a number at all: check_range's message says so
+            raise
+        raise ValueError(f"{allowed}, got {str(e).rsplit('got ', 1)[1]}") from None
+    if x != 0.0 and math.isfinite(x) and not lo <= x <= hi:
+        raise ValueError(f"{allowed}, got {x!r}")
+    return x
 
 
 def natural_frequency_mass(r: float, wave: SquareWave, G_star: float) -> float:

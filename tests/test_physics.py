@@ -278,6 +278,22 @@ def test_bad_dimensionless_inputs_rejected(args, name):
         ex.working_point(*args)
 
 
+
+@pytest.mark.parametrize("r,got", [(-1, "got -1.0"), (np.float64(-2.0), "got -2.0"),
+                                   (float("nan"), "got NaN"), (1e-200, "got 1e-200"),
+                                   (1e200, "got 1e+200"), (-math.inf, "got -inf"),
+                                   (10**400, "got an integer too large for a float")])
+def test_omega_n_ratio_out_of_range_gets_one_message(r, got):
+    """Every bad omega_n/Omega gets the one message with all three allowed forms (a negative
+    value was told only "[0, inf] or inf", which 1e-200 also satisfies)."""
+    with pytest.raises(ValueError) as e:
+        ex.check_omega_n_ratio(r)
+    msg = str(e.value)
+    assert msg.startswith("omega_n_ratio must be 0 (infinitely heavy runner), inf (massless) "
+                          "or in [1e-100, 1e+100], ") and got in msg, msg
+    for ok in (0, 0.0, math.inf, 1e-100, 1.0, 1e100):
+        assert ex.check_omega_n_ratio(ok) == ok
+
 @pytest.mark.parametrize("bad", [2.5, math.inf, math.nan, None, True, 10**20, 1])
 def test_run_lengths_are_integers_in_range(bad):
     """mindlin's points and n_sub and working_point's periods take one integer check (n_sub
