@@ -443,7 +443,8 @@ def _set_radius(W, st, p, a_new, d_new, mu, ledger):
     # cells inside the new contact (and so the old) lose nothing: only the edge cells are cut
     # (with finite friction the inner ones may still snap to their lowered limits)
     if a_new > 0.0:
-        j0, j1 = _inner_range(i0, i1, c - a_new, c + a_new, x_lo, dx, inv_dx)
+        j0, j1 = _inner_range(i0, i1, c - a_new, c + a_new, x_lo, dx, inv_dx,
+                              _inner_tol(x_lo, inv_dx, n))
     else:
         j0, j1 = i1 + 1, i1
     if mu is None:
@@ -595,20 +596,25 @@ def _converged(g, mass, vv, v0, dt, Ta, F):
 
 
 @njit(inline="always", **JIT)
-def _inner_range(i0, i1, full_lo, full_hi, x_lo, dx, inv_dx):
+def _inner_tol(x_lo, inv_dx, n):
+    """Margin, in cells, of ``_inner_range``'s estimates: at least 100 times the rounding of
+    the estimate (full - x_lo) / dx against the cell bounds x_lo + j dx, which is at most
+    about 6 n + 2 |x_lo| / dx + 1 units in the last place for cells 0..n."""
+    return 1e-12 * (1.0 + n + abs(x_lo) * inv_dx)
+
+
+@njit(inline="always", **JIT)
+def _inner_range(i0, i1, full_lo, full_hi, x_lo, dx, inv_dx, tol):
     """Cells j0..j1 of i0..i1 that lie inside [full_lo, full_hi] (inside the contact during the
-    whole sub-step), by the same floating-point test as the cell bounds; j1 = j0 - 1 when
-    there is none, with i0 <= j0 <= i1 + 1 so that i0..j0-1 and j1+1..i1 are the edge cells."""
-    j0 = _index(np.ceil((full_lo - x_lo) * inv_dx), i0, i1 + 1)
-    while j0 <= i1 and x_lo + j0 * dx < full_lo:
-        j0 += 1
-    while j0 > i0 and x_lo + (j0 - 1) * dx >= full_lo:
-        j0 -= 1
-    j1 = _index(np.floor((full_hi - x_lo) * inv_dx) - 1.0, j0 - 1, i1)
-    while j1 >= j0 and x_lo + j1 * dx + dx > full_hi:
-        j1 -= 1
-    while j1 < i1 and x_lo + (j1 + 1) * dx + dx <= full_hi:
-        j1 += 1
+    whole sub-step); j1 = j0 - 1 when there is none, with i0 <= j0 <= i1 + 1 so that i0..j0-1
+    and j1+1..i1 are the edge cells.  Estimated from the quotients with the margin ``tol``
+    (``_inner_tol``) on the safe side: no cell outside [full_lo, full_hi] is ever inner, and a
+    cell inside it whose bound lies within ``tol`` cells of full_lo or full_hi (about 1e-9
+    cells) is left to the edge cells, which integrate any cell exactly (the same result to
+    round-off).  Exact floating-point tests against the cell bounds, as before, cost 2-3% of
+    the env step."""
+    j0 = _index(np.ceil((full_lo - x_lo) * inv_dx + tol), i0, i1 + 1)
+    j1 = _index(np.floor((full_hi - x_lo) * inv_dx - tol) - 1.0, j0 - 1, i1)
     return j0, j1
 
 
@@ -792,6 +798,7 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
     inv3R = 1.0 / (3.0 * R)
     inv_dx = 1.0 / dx
     dxdt = dx * dt
+    tol = _inner_tol(x_lo, inv_dx, n)
     muEG = 0.0
     if mu is not None:
         muEG = mu * EG
@@ -842,7 +849,7 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
         Tt0 = 0.0
         dT0 = 0.0
         if a > 0.0:
-            j0, j1 = _inner_range(i0, i1, full_lo, full_hi, x_lo, dx, inv_dx)
+            j0, j1 = _inner_range(i0, i1, full_lo, full_hi, x_lo, dx, inv_dx, tol)
         else:
             j0 = i1 + 1
             j1 = i1

@@ -419,6 +419,65 @@ def test_cells_a_tick_touches_are_the_cells_of_the_contact_at_ulp_level():
                            "quotient would miss: the test no longer probes the ulp case")
 
 
+def _exact_inner(i0, i1, full_lo, full_hi, x_lo, dx):
+    """Cells of i0..i1 inside [full_lo, full_hi] by the cell bounds as the kernel computes them
+    (x_lo + j dx and that plus dx), one by one."""
+    return [j for j in range(i0, i1 + 1)
+            if x_lo + j * dx >= full_lo and x_lo + j * dx + dx <= full_hi]
+
+
+@pytest.mark.parametrize("x_lo,n", [(-8.0, 400), (-3.7e3, 100_000), (-1.9e6, 20_000_000)])
+def test_inner_cells_are_never_outside_and_exact_but_within_the_margin(x_lo, n):
+    """``_inner_range`` estimates the inner cells with a margin instead of testing the cell
+    bounds (2-3% of the env step): it must never call a cell inner that is not inside the
+    sub-step's full-contact interval by the exact cell-bound test (the inner cells' build
+    assumes overlap dx), and it must equal that test except where an end lies within the
+    margin of a cell bound (such a cell goes to the edge cells, exact as well).  Ends placed a
+    few ulps either side of cell bounds, at resolutions whose 1/dx is not exact, near a row's
+    start and deep in rows of up to 2e7 cells (the model's limit), plus random ends; also the
+    load change's use (one contact, no travel) and travels longer than the contact."""
+    rng = np.random.default_rng(11)
+    n_near = n_cases = 0
+    for dx in (1 / 10, 1 / 12, 1 / 37.3, 0.3, 1.7):
+        xl = x_lo * dx * 10  # the row's start, |x_lo| / dx = 10 |x_lo|
+        inv_dx = 1.0 / dx
+        tol = K._inner_tol(xl, inv_dx, n)
+        for m in np.r_[rng.integers(1, min(n, 300), 40), rng.integers(1, n - 50, 40)]:
+            for k_lo, k_hi in [(0, 0), (1, -1), (-1, 1), (3, -2), (-4, 4), (2, 2), (-2, -3)]:
+                width = int(rng.integers(0, 40))
+                full_lo = xl + int(m) * dx
+                full_hi = xl + (int(m) + width) * dx
+                for _ in range(abs(k_lo)):
+                    full_lo = math.nextafter(full_lo, math.copysign(math.inf, k_lo))
+                for _ in range(abs(k_hi)):
+                    full_hi = math.nextafter(full_hi, math.copysign(math.inf, k_hi))
+                if rng.random() < 0.3:  # random ends, including no full cell at all
+                    full_lo += float(rng.uniform(-1, 1)) * dx
+                    full_hi = full_lo + float(rng.uniform(-2, 30)) * dx
+                travel = int(rng.integers(0, 3))
+                i0 = max(int(math.floor((full_lo - xl) * inv_dx)) - travel, 0)
+                i1 = min(int(math.floor((full_hi - xl) * inv_dx)) + travel, n - 1)
+                if i1 < i0:
+                    continue
+                j0, j1 = K._inner_range(i0, i1, full_lo, full_hi, xl, dx, inv_dx, tol)
+                assert i0 <= j0 <= i1 + 1 and j0 - 1 <= j1 <= i1, (i0, i1, j0, j1)
+                got = list(range(j0, j1 + 1))
+                want = _exact_inner(i0, i1, full_lo, full_hi, xl, dx)
+                n_cases += 1
+                near = min(abs((full_lo - xl) * inv_dx - round((full_lo - xl) * inv_dx)),
+                           abs((full_hi - xl) * inv_dx - round((full_hi - xl) * inv_dx)))
+                n_near += near <= tol
+                assert set(got) <= set(want), (
+                    f"dx = {dx!r}, x_lo = {xl!r}: cells {sorted(set(got) - set(want))} called "
+                    f"inner outside [{full_lo!r}, {full_hi!r}]")
+                if got != want:
+                    assert near <= 2 * tol, (f"dx = {dx!r}: cells {got[:1]}..{got[-1:]} for "
+                                             f"{want[:1]}..{want[-1:]}, ends {near:.1e} cells "
+                                             f"from a bound (margin {tol:.1e})")
+    assert n_cases > 2000, n_cases
+    assert n_near > 100, f"{n_near} ends within the margin: the test no longer probes it"
+
+
 GOLDEN = Path(__file__).parent / "data" / "golden_3ab498b.npz"
 
 
