@@ -13,10 +13,10 @@ transitions are bit-identical to N single envs).  Two thin adapters:
 
 Seeding follows Gymnasium: env i of a batch seeded s behaves like a single env seeded s + i.
 The threaded kernel (``prange``) is used from ``PARALLEL_MIN_ENVS`` envs on: measured on the
-2-core machine (default scene, ``rolling-drive bench``'s batch-size table, nine runs of
-2026-11-24's fourteenth session) it is 0.61-0.64x the serial kernel at 1 env, 0.94-0.98x at
-4 (0.95-0.96x at 5, measured separately with the same passes), 1.05-1.10x at 6, 1.16-1.20x
-at 8 and 1.66-1.89x at 256, where the second core gives about 1.9x.
+2-core machine (default scene, ``rolling-drive bench``'s batch-size table, seven undisturbed
+runs of nine of 2026-11-24's final code) it is 0.61-0.63x the serial kernel at 1 env,
+0.90-0.98x at 4 (0.95-0.96x at 5, measured separately with the same passes), 1.01-1.09x at
+6, 0.88-1.19x at 8 and 1.70-1.90x at 256, where the second core gives about 1.9x.
 """
 from __future__ import annotations
 
