@@ -611,9 +611,8 @@ def _inner_range(i0, i1, full_lo, full_hi, x_lo, dx, inv_dx, tol):
     and j1+1..i1 are the edge cells.  Estimated from the quotients with the margin ``tol``
     (``_inner_tol``) on the safe side: no cell outside [full_lo, full_hi] is ever inner, and a
     cell inside it whose bound lies within ``tol`` cells of full_lo or full_hi is left to the
-    edge cells, which integrate any cell exactly (the same result to
-    round-off).  Exact floating-point tests against the cell bounds, as before, cost 2-3% of
-    the env step."""
+    edge cells, which integrate any cell exactly (the same result to round-off).  Exact
+    floating-point tests against the cell bounds, as before, cost 2-3% of the env step."""
     j0 = _index(np.ceil((full_lo - x_lo) * inv_dx + tol), i0, i1 + 1)
     j1 = _index(np.floor((full_hi - x_lo) * inv_dx - tol) - 1.0, j0 - 1, i1)
     return j0, j1

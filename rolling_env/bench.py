@@ -472,8 +472,7 @@ def report(res) -> str:
           "Every timed pass spans whole episodes, so each holds the resets at the rate "
           "training meets them: the batched passes reset every env once per episode, the "
           "single env's pass of many episodes its own.", "",
-          "| | aggregate env steps/s | vs single env (target >= 10x; two decimals, so that "
-          "9.96x does not read as 10.0x) |", "|---|---|---|",
+          "| | aggregate env steps/s | vs single env (target >= 10x) |", "|---|---|---|",
           f"| single env (gym.make) | {b['single']:,.0f} | 1.00x |",
           f"| batched core, serial kernel | {b['serial']:,.0f} | "
           f"{b['serial'] / b['single']:.2f}x |",

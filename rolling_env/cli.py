@@ -18,22 +18,27 @@ from .io import interrupt_ends_process
 COMMAND_MODULES = ["physics", "figures", "converge", "stability", "bench", "rollout"]
 
 
-def finite_float(name, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=False, allow_inf=False):
-    """argparse type: a float checked by ``validation.check_range`` (message names the parameter)."""
-    from .validation import check_range
-
+def checked_float(name, check):
+    """argparse type: a float passed to ``check(name, x)``, a library check that returns it
+    or raises ValueError naming ``name`` (the flag's name, so the message names the flag)."""
     def conv(text):
         try:
             x = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
         try:
-            return check_range(name, x, lo, hi, lo_open=lo_open, hi_open=hi_open,
-                               allow_inf=allow_inf)
+            return check(name, x)
         except ValueError as e:
             raise argparse.ArgumentTypeError(str(e)) from None
     conv.__name__ = name
     return conv
+
+
+def finite_float(name, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=False, allow_inf=False):
+    """argparse type: a float checked by ``validation.check_range`` (message names the parameter)."""
+    from .validation import check_range
+    return checked_float(name, lambda n, x: check_range(n, x, lo, hi, lo_open=lo_open,
+                                                        hi_open=hi_open, allow_inf=allow_inf))
 
 
 def positive_int(name, lo=1, hi=10**9):

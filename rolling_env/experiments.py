@@ -236,20 +236,14 @@ ENERGY_FLOOR = 1e-9  # round-off floor of energy balances, in 2 G* a1^3 per peri
 OMEGA_N_RATIO_RANGE = (1e-100, 1e100)  # finite nonzero r: m stays a finite positive double
 
 
-def check_omega_n_ratio(r) -> float:
+def check_omega_n_ratio(r, name: str = "omega_n_ratio") -> float:
     """omega_n / Omega: 0 (infinitely heavy runner), inf (massless) or a finite value inside
     ``OMEGA_N_RATIO_RANGE``; anything else raises one ValueError naming all three."""
     lo, hi = OMEGA_N_RATIO_RANGE
-    allowed = (f"omega_n_ratio must be 0 (infinitely heavy runner), inf (massless) or in "
-               f"[{lo:g}, {hi:g}]")
-    try:
-        x = check_range("omega_n_ratio", r, 0.0, math.inf, allow_inf=True)
-    except ValueError as e:
-        if "must be a number" in str(e):  # not a number at all: check_range's message says so
-            raise
-        raise ValueError(f"{allowed}, got {str(e).rsplit('got ', 1)[1]}") from None
+    allowed = f"0 (infinitely heavy runner), inf (massless) or in [{lo:g}, {hi:g}]"
+    x = check_range(name, r, 0.0, math.inf, allow_inf=True, allowed=allowed)
     if x != 0.0 and math.isfinite(x) and not lo <= x <= hi:
-        raise ValueError(f"{allowed}, got {x!r}")
+        raise ValueError(f"{name} must be {allowed}, got {x!r}")
     return x
 
 

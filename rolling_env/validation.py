@@ -8,11 +8,14 @@ import numpy as np
 
 
 def check_range(name: str, value, lo: float, hi: float, *, lo_open: bool = False,
-                hi_open: bool = False, allow_inf: bool = False) -> float:
+                hi_open: bool = False, allow_inf: bool = False, allowed: str | None = None
+                ) -> float:
     """Return ``float(value)`` or raise ValueError naming ``name`` and the allowed range.
 
     NaN is always rejected; +inf only with ``allow_inf``; booleans too (``True`` is not the
-    number 1.0 here: a flag passed where a number belongs is a mistake).
+    number 1.0 here: a flag passed where a number belongs is a mistake).  ``allowed``: what
+    the messages say the value must be, where the caller admits less than [lo, hi] (e.g. "0,
+    inf or in [1e-100, 1e+100]") and checks the rest itself with the same words.
     """
     if isinstance(value, (bool, np.bool_)):
         raise ValueError(f"{name} must be a number, got the boolean {value!r}")
@@ -21,20 +24,20 @@ def check_range(name: str, value, lo: float, hi: float, *, lo_open: bool = False
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a number, got {value!r}") from None
     except OverflowError:  # an integer beyond the float range (10**400)
-        raise ValueError(f"{name} must be in {_range(lo, hi, lo_open, hi_open, allow_inf)}, "
-                         f"got an integer too large for a float ({len(str(abs(value)))} "
-                         "digits)") from None
+        must = allowed or f"in {_range(lo, hi, lo_open, hi_open, allow_inf)}"
+        raise ValueError(f"{name} must be {must}, got an integer too large for a float "
+                         f"({len(str(abs(value)))} digits)") from None
     if math.isnan(x):
-        raise ValueError(f"{name} must be in {_range(lo, hi, lo_open, hi_open, allow_inf)}, "
-                         "got NaN")
+        must = allowed or f"in {_range(lo, hi, lo_open, hi_open, allow_inf)}"
+        raise ValueError(f"{name} must be {must}, got NaN")
     if math.isinf(x) and x > 0 and allow_inf:
         return x
     bad = (x < lo or x > hi or (lo_open and x == lo) or (hi_open and x == hi)
            or (math.isinf(x) and not allow_inf))
     if bad:
-        extra = " or inf" if allow_inf else ""
-        raise ValueError(f"{name} must be in {_range(lo, hi, lo_open, hi_open, allow_inf)}"
-                         f"{extra}, got {x!r}")
+        must = allowed or (f"in {_range(lo, hi, lo_open, hi_open, allow_inf)}"
+                           + (" or inf" if allow_inf else ""))
+        raise ValueError(f"{name} must be {must}, got {x!r}")
     return x
 
 

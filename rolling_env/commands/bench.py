@@ -10,7 +10,8 @@ def register(sub):
                        "Pendulum-v1, naive reference at equal accuracy, scene specialisation, "
                        "batched env, start-up and memory; writes a markdown report.")
     p.add_argument("--out", type=file_path("out"), default="results/benchmarks.md",
-                   help="report path (default results/benchmarks.md, relative to the current directory)")
+                   help="report path (default results/benchmarks.md, relative to the current "
+                   "directory)")
     p.add_argument("--quick", action="store_true", help="fewer steps and scenes (report not written)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_run)

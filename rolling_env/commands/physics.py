@@ -4,19 +4,7 @@ from __future__ import annotations
 import math
 
 from .. import experiments as ex
-from ..cli import emit, finite_float, positive_int
-
-
-def _omega_n_ratio(text):
-    """argparse type of --omega-n-ratio: ``experiments.check_omega_n_ratio``'s one message
-    for every bad value (0, inf or inside the range), naming the flag."""
-    import argparse
-    try:
-        return ex.check_omega_n_ratio(float(text))
-    except ValueError as e:
-        msg = (str(e) if "omega_n_ratio" in str(e)
-               else f"omega_n_ratio must be a number, got {text!r}")
-        raise argparse.ArgumentTypeError(msg.replace("omega_n_ratio", "omega-n-ratio")) from None
+from ..cli import checked_float, emit, finite_float, positive_int
 
 
 def register(sub):
@@ -37,7 +25,8 @@ def register(sub):
                        "Omega with omega_n = sqrt(2 a1 G*/m), Omega = 2 pi/tau (0: infinite "
                        "mass, inf: massless).")
     _dimensionless(p)
-    p.add_argument("--omega-n-ratio", type=_omega_n_ratio, required=True,
+    p.add_argument("--omega-n-ratio", required=True,
+                   type=checked_float("omega-n-ratio", lambda n, x: ex.check_omega_n_ratio(x, n)),
                    help="r = omega_n / Omega: 0 (infinitely heavy), inf (massless) or in "
                    f"[{ex.OMEGA_N_RATIO_RANGE[0]:g}, {ex.OMEGA_N_RATIO_RANGE[1]:g}]")
     p.add_argument("--mu", type=finite_float("mu", 0, math.inf, lo_open=True, allow_inf=True),
