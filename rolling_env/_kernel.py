@@ -99,7 +99,9 @@ ST_FLAG = 14    # error flags (bit field, see FLAG_*)
 ST_ITER = 15    # cumulative Newton iterations (finite friction, free runner)
 ST_SNAP = 16    # cumulative elastic energy lost beyond the Coulomb work when springs snap to
                 # the lower friction limit of an instantaneous normal-load drop
-N_STATE = 17
+ST_KIN0 = 17    # runner's kinetic energy at reset: the ledger's starting balance (written by
+                # Drive.reset, read by Drive.energy; the kernel never touches it)
+N_STATE = 18
 
 FLAG_GRID = 1       # the contact reached the end of the spring row
 FLAG_NONFINITE = 2  # a non-finite value appeared (kernel stopped)

@@ -284,7 +284,8 @@ def simulate(delta, eps, w, omega_n_ratio, *, mu=math.inf, periods=40,
 
     Returns ``mean_v_star_over_omega_R`` (mean runner velocity over the second half of the
     periods, paper convention), ``slip_work`` (per period, in units of 2 G* a1^3),
-    ``energy_residual`` (residual / drive work: positive = dissipated by the numerics; the
+    ``energy_residual`` (residual / work put in, ``Drive.energy``'s ``work_in``: drive and load
+    work plus the runner's initial kinetic energy; positive = dissipated by the numerics; the
     work is floored at ``ENERGY_FLOOR`` x 2 G* a1^3 per period, so that a runner too light to
     load the contact does not divide round-off by round-off),
     ``seconds``; with ``record`` also the per-tick trajectory.  ``step_converged``,
@@ -336,7 +337,7 @@ def simulate(delta, eps, w, omega_n_ratio, *, mu=math.inf, periods=40,
     res = {
         "mean_v_star_over_omega_R": float(direction * mean_v / wave.omega_R),
         "slip_work": float(e["slip"] / periods / unit),
-        "energy_residual": float(e["residual"] / max(abs(e["drive"]) + abs(e["ext"]),
+        "energy_residual": float(e["residual"] / max(e["work_in"],
                                                      ENERGY_FLOOR * unit * int(periods))),
         "seconds": seconds,
         "eq32": float(analytic.eq32(delta, eps, w)) if w >= 2 else None,

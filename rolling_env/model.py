@@ -242,6 +242,15 @@ class Drive(CellViews):
         self.st[:] = 0.0
         self.st[K.ST_C] = c0 / self.L0
         self.st[K.ST_VS] = vstar0 * self.t0 / self.L0
+        m = self.params.m
+        if math.isfinite(m):  # the ledger starts from the runner's kinetic energy
+            kin0 = 0.5 * m * vstar0 * vstar0 / self.W0
+            if not math.isfinite(kin0):
+                self.st[:] = 0.0
+                raise ValueError(f"vstar0 = {vstar0:g} m/s gives the runner (m = {m:g} kg) a "
+                                 "kinetic energy beyond the float range; choose a smaller "
+                                 "vstar0")
+            self.st[K.ST_KIN0] = kin0
 
     def get_state(self) -> tuple[np.ndarray, np.ndarray]:
         return self.U.copy(), self.st.copy()
@@ -399,12 +408,15 @@ class Drive(CellViews):
     def energy(self) -> dict:
         """Cumulative energy terms [J] and the balance residual.
 
-        drive = elastic + release + slip + snap + runner_work, runner_work + ext = kinetic
-        (+ numerical dissipation of the implicit step).  ``slip`` is the Coulomb work (wear),
-        ``release`` the elastic energy of springs leaving the contact, ``snap`` the energy lost
-        beyond the Coulomb work when springs snap to a friction limit that dropped (a sudden
-        load drop; O(dt) otherwise).  ``residual`` = drive + ext - (elastic + release + slip
-        + kinetic), i.e. energy lost to discretisation (positive) or created (negative).
+        drive = elastic + release + slip + snap + runner_work, runner_work + ext = kinetic -
+        kinetic_start (+ numerical dissipation of the implicit step).  ``slip`` is the Coulomb
+        work (wear), ``release`` the elastic energy of springs leaving the contact, ``snap``
+        the energy lost beyond the Coulomb work when springs snap to a friction limit that
+        dropped (a sudden load drop; O(dt) otherwise), ``kinetic`` the runner's kinetic energy
+        now and ``kinetic_start`` at ``reset`` (``vstar0``; 0 for a prescribed runner).
+        ``residual`` = drive + ext + kinetic_start - (elastic + release + slip + snap +
+        kinetic), i.e. energy lost to discretisation (positive) or created (negative).
+        ``work_in`` = |drive| + |ext| + kinetic_start, the scale to judge the residual by.
         """
         if not self.ledger:
             raise RuntimeError("this drive is stepped by the env kernel, which leaves the energy "
@@ -425,12 +437,14 @@ class Drive(CellViews):
             "slip": st[K.ST_SLIP] * W0,
             "snap": st[K.ST_SNAP] * W0,
             "kinetic": kin,
+            "kinetic_start": st[K.ST_KIN0] * W0,
         }
         lost = e["elastic"] + e["release"] + e["slip"] + e["snap"]
         if math.isfinite(m):
-            e["residual"] = e["drive"] + e["ext"] - (lost + e["kinetic"])
+            e["residual"] = e["drive"] + e["ext"] + e["kinetic_start"] - (lost + e["kinetic"])
         else:  # prescribed runner: its work is supplied by whatever prescribes it
             e["residual"] = e["drive"] - e["runner"] - lost
+        e["work_in"] = abs(e["drive"]) + abs(e["ext"]) + e["kinetic_start"]
         return e
 
     def normal_force(self) -> float:

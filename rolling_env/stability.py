@@ -52,9 +52,9 @@ EPS_STICK, EPS_FRICTION = 0.1, 0.995
 def _balance(e: dict, periods: float, prescribed: bool):
     """(ledger residual relative to the work put in, state energy bounded by that work)."""
     floor = FLOOR * WORK_UNIT * max(periods, 1.0)
-    work = abs(e["drive"]) + abs(e["ext"])
-    rel = float(e["residual"] / max(work, floor))
-    supply = e["drive"] - e["runner"] if prescribed else e["drive"] + e["ext"]
+    rel = float(e["residual"] / max(e["work_in"], floor))
+    supply = (e["drive"] - e["runner"] if prescribed
+              else e["drive"] + e["ext"] + e["kinetic_start"])
     state_ok = bool(e["elastic"] + e["kinetic"] <= supply + floor)
     return rel, state_ok
 
