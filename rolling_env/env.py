@@ -318,19 +318,37 @@ def check_action_dtype(action) -> np.ndarray:
     return a
 
 
-def raise_step_error(bad: int, action, shape, st, scene: Scene | None = None) -> None:
+def raise_step_error(bad: int, action, shape, st, scene: Scene | None = None,
+                     extra=None) -> None:
     """Raise what a nonzero status of the env kernel stands for: -1 a bad action (nothing was
     stepped), > 0 envs with a kernel error flag or a non-finite reward or velocity (with
-    ``scene``, the error names the scene keys that can cause it)."""
+    ``scene``, the error names the scene keys that can cause it).  For a batch (``extra``
+    given, rows of ``st`` per env) the error names the envs that failed."""
     if bad < 0:
         check_actions(action, shape)  # raises with the reason
         raise ValueError("action must be finite and inside [-1, 1]")
+    which = "" if extra is None else _failed_envs(st, extra)
     try:
         check_flags(st)
+    except (RuntimeError, ValueError) as e:  # the grid flag; no equilibrium
+        raise type(e)(f"{e}{which}") from None
     except FloatingPointError as e:
-        raise FloatingPointError(f"{e}{_overflow_hint(scene)}") from None
+        raise FloatingPointError(f"{e}{_overflow_hint(scene)}{which}") from None
     # no flag raised: a non-finite reward or velocity
-    raise FloatingPointError(f"non-finite state after a physics tick{_overflow_hint(scene)}")
+    raise FloatingPointError(f"non-finite state after a physics tick{_overflow_hint(scene)}"
+                             f"{which}")
+
+
+def _failed_envs(st, extra) -> str:
+    """Which envs of a batch ``_envkernel._env_bad`` counted, for the error message: every
+    env was stepped, these are left in an invalid state (reset them)."""
+    flag = st[:, K.ST_FLAG].astype(np.int64) & (K.FLAG_GRID | K.FLAG_NONFINITE)
+    ok = np.isfinite(extra[:, EK.X_REWARD]) & np.isfinite(extra[:, EK.X_VS])
+    bad = np.flatnonzero((flag != 0) | ~ok).tolist()
+    shown = ", ".join(map(str, bad[:10])) + (", ..." if len(bad) > 10 else "")
+    return (f" (in {len(bad)} of the batch's {st.shape[0]} envs: {shown}; the others stepped "
+            "normally; reset the failed ones, in gym.make_vec with "
+            "reset(options={'reset_mask': mask}))")
 
 
 def _overflow_hint(scene: Scene | None) -> str:

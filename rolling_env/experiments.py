@@ -66,8 +66,9 @@ def _drive(wave: SquareWave, geo: Geometry, params: DriveParams, resolution: flo
                  a_max=wave.a1, t_ref=wave.tau, grid_offset=grid_offset)
 
 
-MAX_TICKS = 2 * 10**7  # ticks of one simulated run: its per-tick inputs and outputs (~100 B
-# a tick) are held in memory, so a run is capped at ~2 GB
+MAX_TICKS = 5 * 10**6  # ticks of one simulated run: its per-tick inputs and outputs are held
+# in memory, measured at 225 B a tick at the peak (simulate of 2e6 ticks: 636 MB resident,
+# 182 MB for 4 ticks), so a run at the cap needs about 1.3 GB (the old cap of 2e7: 4.5 GB)
 TICKS_PER_HALF_MAX = 10**5
 
 

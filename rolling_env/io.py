@@ -23,18 +23,30 @@ _STAGE: contextvars.ContextVar[list | None] = contextvars.ContextVar("_STAGE", d
 
 
 @contextlib.contextmanager
-def _sigint_swapped(expected, handler):
-    """SIGINT handled by ``handler`` for the block where it is ``expected`` now (and this is
-    the main thread, the only one that may set handlers); ``expected`` again after it."""
+def _handler_swapped(sig, expected, handler):
+    """Signal ``sig`` handled by ``handler`` for the block where it is ``expected`` now (and
+    this is the main thread, the only one that may set handlers); ``expected`` again after
+    it."""
     if (threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(signal.SIGINT) is not expected):
+            or signal.getsignal(sig) is not expected):
         yield  # e.g. SIGINT ignored (a script's background job) or someone else's handler
         return
-    signal.signal(signal.SIGINT, handler)
+    signal.signal(sig, handler)
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, expected)
+        signal.signal(sig, expected)
+
+
+def _sigint_swapped(expected, handler):
+    return _handler_swapped(signal.SIGINT, expected, handler)
+
+
+def _raise_terminated(signum, frame):
+    """SIGTERM (``timeout``, job schedulers) as SystemExit(128 + signal): the writes below
+    then remove their temporary files and the process still exits 143, as the OS default
+    would have it."""
+    raise SystemExit(128 + signum)
 
 
 def interrupt_ends_process():
@@ -45,11 +57,15 @@ def interrupt_ends_process():
     return _sigint_swapped(signal.default_int_handler, signal.SIG_DFL)
 
 
+@contextlib.contextmanager
 def interrupt_raises():
-    """Ctrl-C raises KeyboardInterrupt inside the block even within ``interrupt_ends_process``:
-    the writes below then remove their temporary files on Ctrl-C instead of leaving them
-    behind.  A no-op elsewhere."""
-    return _sigint_swapped(signal.SIG_DFL, signal.default_int_handler)
+    """Ctrl-C raises KeyboardInterrupt inside the block even within ``interrupt_ends_process``,
+    and SIGTERM, where it has the OS default (ending the process at once), raises
+    SystemExit(143): the writes below then remove their temporary files instead of leaving
+    them behind.  A no-op where the signals have other handlers."""
+    with _sigint_swapped(signal.SIG_DFL, signal.default_int_handler), \
+            _handler_swapped(signal.SIGTERM, signal.SIG_DFL, _raise_terminated):
+        yield
 
 
 def atomic_write(path: str | os.PathLike, writer) -> Path:
@@ -137,6 +153,28 @@ def _give_mode(tmp, path: Path) -> None:
         os.chmod(tmp, mode)
     except OSError:
         pass
+
+
+def check_writable(path, folder: bool = False, name: str = "out") -> Path:
+    """Raise OSError naming ``name`` unless the folder ``path`` (``folder``) or the folder of
+    the file ``path`` can take new files (made if missing): for a command to call before it
+    computes anything, so that an unwritable --out fails at once, not after the work."""
+    path = Path(path)
+    d = path if folder else path.parent
+    for up in (d, *d.parents):
+        if up.exists():
+            if not up.is_dir():
+                raise NotADirectoryError(f"--{name}: cannot write {str(path)!r}: {str(up)!r} "
+                                         "is a file, not a folder")
+            break
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=d, prefix=".probe."):
+            pass
+    except OSError as e:
+        raise OSError(f"--{name}: cannot write to the folder {str(d)!r}: "
+                      f"{e.strerror or e}") from None
+    return path
 
 
 def write_text(path, text: str) -> Path:

@@ -166,7 +166,7 @@ class BatchCore(CellViews):
                             self.out, self.obs, self.extra, self.rew, self.trunc,
                             self.max_episode_steps, *self.features)
         if bad:
-            raise_step_error(bad, a, (self.num_envs, 3), self.st, self.scene)
+            raise_step_error(bad, a, (self.num_envs, 3), self.st, self.scene, self.extra)
         return self.obs.copy(), self.rew.copy(), self.trunc.copy()
 
     def info(self, i: int) -> dict:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import signal
 import subprocess
 import sys
 
@@ -249,6 +250,81 @@ print(sorted(p.name for p in out.iterdir()), (out / "a.csv").read_text())
     r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr[-1000:]
     assert r.stdout.split() == ["interrupted", "['a.csv']", "old", "a"], r.stdout
+
+
+def test_sigterm_while_writing_removes_the_temporary_files(tmp_path):
+    """SIGTERM (what ``timeout`` and job schedulers send) during a staged write removed
+    nothing: the process ended at once and left hidden temporary files beside the outputs
+    for good.  Now it removes them, leaves the old file and still exits 143 (128 + SIGTERM);
+    outside a write SIGTERM keeps the OS default.  Run in a child process."""
+    script = f"""
+import os, signal
+from pathlib import Path
+from rolling_env.io import interrupt_ends_process, staged, write_text
+out = Path({str(tmp_path)!r})
+write_text(out / "a.csv", "old a")
+with interrupt_ends_process():
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+    with staged():
+        write_text(out / "a.csv", "new a")
+        write_text(out / "b.png", "new b")
+        os.kill(os.getpid(), signal.SIGTERM)
+        print("not terminated")
+"""
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 128 + signal.SIGTERM, f"exit {r.returncode}: {r.stderr[-1000:]}"
+    assert "not terminated" not in r.stdout and "Traceback" not in r.stderr, r
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv"], (
+        sorted(p.name for p in tmp_path.iterdir()))
+    assert (tmp_path / "a.csv").read_text() == "old a"
+
+
+@pytest.mark.parametrize("argv,compute", [
+    (["figures"], "rolling_env.figures.make_figures"),
+    (["converge", "--quick"], "rolling_env.converge.study"),
+    (["stability", "--quick"], "rolling_env.stability.run"),
+    (["stability"], "rolling_env.stability.run"),
+    (["bench", "--quick"], "rolling_env.bench.run"),
+    (["rollout", "--controller", "zero"], "rolling_env.rollout.rollout"),
+])
+def test_unwritable_out_fails_before_any_work(tmp_path, capsys, monkeypatch, argv, compute):
+    """An --out that cannot take files (here: below a file) is refused in one line naming
+    --out, exit 2, before the command computes anything (it was found only when the results
+    were written, after all the work, with an OS message that named neither --out nor the
+    cause: "[Errno 17] File exists: '/etc/passwd'")."""
+    import importlib
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    mod, fn = compute.rsplit(".", 1)
+    monkeypatch.setattr(importlib.import_module(mod), fn,
+                        lambda *a, **k: pytest.fail("computed before checking --out"))
+    out = blocker / ("report.md" if argv[0] in ("stability", "bench") else "sub")
+    assert main(argv + ["--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"--out: cannot write {str(out)!r}: {str(blocker)!r} is a file" in err, err
+
+
+@pytest.mark.parametrize("command,module,default", [
+    ("stability", "rolling_env.stability", "results/stability.md"),
+    ("bench", "rolling_env.bench", "results/benchmarks.md")])
+def test_quick_report_is_written_only_where_out_is_given(tmp_path, monkeypatch, capsys,
+                                                         command, module, default):
+    """--quick never writes the full report's default path, also when it is spelled
+    differently (./results/... was compared as a string and overwrote the full report with
+    the quick subset), and writes the report where --out is given (bench --quick ignored
+    --out without a word).  The computation is replaced by a stub: this checks where the CLI
+    writes, not what it computes."""
+    import importlib
+    mod = importlib.import_module(module)
+    monkeypatch.setattr(mod, "run", lambda quick=False: [] if command == "stability" else {})
+    monkeypatch.setattr(mod, "report", lambda rows: "QUICK REPORT\n")
+    monkeypatch.chdir(tmp_path)
+    assert main([command, "--quick"]) == 0
+    assert not (tmp_path / default).exists(), "--quick wrote the full report's path"
+    given = "./" + default
+    assert main([command, "--quick", "--out", given]) == 0
+    assert (tmp_path / default).read_text() == "QUICK REPORT\n", "--out given but not written"
+    capsys.readouterr()
 
 
 def test_rollout_writes_its_csv_and_plot_together(tmp_path, capsys):

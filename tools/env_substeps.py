@@ -23,7 +23,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a clone
 
 import rolling_env  # noqa: E402
 from agents.baselines import Eq32Feedback  # noqa: E402
-from rolling_env.io import write_text  # noqa: E402
+from rolling_env.cli import file_path  # noqa: E402
+from rolling_env.io import check_writable, write_text  # noqa: E402
 from rolling_env.rollout import rollout  # noqa: E402
 
 
@@ -78,11 +79,16 @@ def report(rows: list[dict]) -> str:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", default="results/env_substeps.md")
+    p.add_argument("--out", type=file_path("out"), default="results/env_substeps.md",
+                   help="report path (default results/env_substeps.md)")
     p.add_argument("--sub-steps", type=int, nargs="+", default=[8, 32, 128, 512, 2048])
     args = p.parse_args(argv)
     if min(args.sub_steps) < 1 or max(args.sub_steps) > 4096:
         p.error(f"--sub-steps must be integers in [1, 4096], got {args.sub_steps}")
+    try:
+        check_writable(args.out)
+    except OSError as e:
+        p.error(str(e))
     text = report(study(tuple(args.sub_steps)))
     write_text(args.out, text)
     print(text)

@@ -23,6 +23,8 @@ def register(sub):
 
 def _run(args):
     from ..converge import headline, speedup_at_equal_error, study, write
+    from ..io import check_writable
+    check_writable(args.out, folder=True)
     name = "work_precision_quick" if args.quick else "work_precision"
     rows = study(quick=args.quick)
     orders = write(rows, args.out, name)

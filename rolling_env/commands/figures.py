@@ -24,6 +24,8 @@ def register(sub):
 
 def _run(args):
     from ..figures import make_figures
+    from ..io import check_writable
+    check_writable(args.out, folder=True)
     r = make_figures(args.out, n=args.points, resolution=args.resolution,
                      resolution9=args.resolution9)
     human = "\n".join([

@@ -35,7 +35,7 @@ def register(sub):
                    default=0.02, help="a1/R (matters with finite friction; default 0.02)")
     p.add_argument("--g-over-e", type=finite_float("g-over-e", 0, 10, lo_open=True),
                    default=ex.Geometry().g_over_e, help="G*/E* (default 0.824, nu = 0.3)")
-    p.add_argument("--periods", type=positive_int("periods", 2, 10**7), default=40,
+    p.add_argument("--periods", type=positive_int("periods", 2, ex.MAX_TICKS // 2), default=40,
                    help="excitation periods to simulate (default 40; the mean runner velocity "
                    "is taken over the second half)")
     p.add_argument("--resolution", type=finite_float("resolution", 2, 1e5),

@@ -41,6 +41,8 @@ def _run(args):
     except ValueError as e:
         raise ValueError(str(e).replace("options['target']", "--target")) from None
     ctrl = make_controller(args.controller, env, seed=args.seed, scene=args.scene)
+    from ..io import check_writable
+    check_writable(args.out, folder=True)
     data = rollout(env, ctrl, seed=args.seed, target=args.target)
     # files named by the scene's key (agents' run folders and tables use it too), not by the
     # name inside the YAML: a copy of default.yaml with other values keeps "name: default"

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from ..cli import emit, file_path
 
+DEFAULT_OUT = "results/stability.md"
+
 
 def register(sub):
     p = sub.add_parser("stability", help="run the grid of stiff and extreme cases",
@@ -13,8 +15,8 @@ def register(sub):
                        "balance, run time and convergence; write a markdown table (PASS/FAIL per "
                        "case, tolerances stated in it) and print it.  Exit code 1 if any case "
                        "fails.")
-    p.add_argument("--out", type=file_path("out"), default="results/stability.md",
-                   help="report path (default results/stability.md, relative to the current "
+    p.add_argument("--out", type=file_path("out"), default=None,
+                   help=f"report path (default {DEFAULT_OUT}, relative to the current "
                    "directory; with --quick the report is only printed unless --out is "
                    "given)")
     p.add_argument("--quick", action="store_true", help="a smaller, faster subset")
@@ -23,11 +25,13 @@ def register(sub):
 
 
 def _run(args):
+    from ..io import check_writable
     from ..stability import report, run, write
+    # the quick subset is written only where --out says so: never over the full report
+    out = args.out if (args.out is not None or args.quick) else DEFAULT_OUT
+    if out is not None:
+        check_writable(out)
     rows = run(quick=args.quick)
-    if args.quick and args.out == "results/stability.md":
-        text = report(rows)  # never overwrite the full report with the quick subset
-    else:
-        text = write(rows, args.out)
+    text = report(rows) if out is None else write(rows, out)
     emit({"rows": rows}, args.json, text)
     return 0 if all(r["status"] == "PASS" for r in rows) else 1
