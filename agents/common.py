@@ -6,9 +6,8 @@ import os
 import re
 from pathlib import Path
 
-import yaml
-
 from rolling_env.io import atomic_write  # noqa: F401  (re-exported)
+from rolling_env.scenes import read_yaml
 
 REPO = Path(__file__).resolve().parent.parent
 CONF_DIR = REPO / "configs" / "hyperparams"
@@ -22,8 +21,7 @@ def load_hyperparams(algo: str, scene: str, conf: str | os.PathLike | None = Non
     if algo not in ALGOS:
         raise ValueError(f"algo must be one of {ALGOS}, got {algo!r}")
     path = Path(conf) if conf else CONF_DIR / f"{algo}.yml"
-    with open(path) as f:
-        table = yaml.safe_load(f)
+    table = read_yaml(path, "hyper-parameter file")
     if not isinstance(table, dict) or not (scene in table or "RollingDrive-v0" in table):
         raise ValueError(f"{path}: needs an entry for scene {scene!r} or for RollingDrive-v0 "
                          "(RL Zoo format)")
@@ -38,6 +36,38 @@ def load_hyperparams(algo: str, scene: str, conf: str | os.PathLike | None = Non
             raise ValueError(f"hyper-parameter 'env_kwargs' must be a mapping, got {env_kwargs!r}")
         hp["env_kwargs"] = dict(env_kwargs, scene=scene)
     return hp
+
+
+def one_line(e: BaseException, limit: int = 200) -> str:
+    """``ExcType: message`` of a library's exception for a one-line error: the message's
+    first sentence, whitespace collapsed, at most ``limit`` characters."""
+    msg = " ".join(str(e).split())
+    msg = msg.split(". ")[0]
+    if len(msg) > limit:
+        msg = msg[:limit - 3] + "..."
+    return f"{type(e).__name__}: {msg}" if msg else type(e).__name__
+
+
+def run_config(run: str | os.PathLike) -> dict | None:
+    """A run folder's config.yml (written by agents.train) as a mapping, None where the run
+    has none; a ValueError naming the file where it is damaged: not YAML, not UTF-8, not a
+    mapping, or with ``env_kwargs`` / ``scene_fields`` that are not mappings and ``algo``,
+    ``scene``, ``scene_key``, ``scene_digest`` that are not strings."""
+    path = Path(run) / "config.yml"
+    if not path.exists():
+        return None
+    cfg = read_yaml(path, "run config")
+    if cfg is None:
+        cfg = {}
+    if not isinstance(cfg, dict):
+        raise ValueError(f"run config {str(path)!r} must hold a mapping (written by "
+                         f"agents.train), got a {type(cfg).__name__}")
+    for key, kind in (("env_kwargs", dict), ("scene_fields", dict), ("algo", str),
+                      ("scene", str), ("scene_key", str), ("scene_digest", str)):
+        if cfg.get(key) is not None and not isinstance(cfg[key], kind):
+            raise ValueError(f"run config {str(path)!r}: {key!r} must be a "
+                             f"{'mapping' if kind is dict else 'string'}, got {cfg[key]!r}")
+    return cfg
 
 
 # ----------------------------------------------------------------- RL Zoo kwargs strings
@@ -169,28 +199,43 @@ def _kinds(annotation) -> set:
 
 
 def _in_range(key, x):
+    """``x`` (a number) in ``RANGES[key]`` (``validation.check_range``: NaN and inf refused
+    too), or a ValueError naming the key and the range."""
+    from rolling_env.validation import check_range
     lo, hi, lo_open, hi_open = RANGES.get(key, (-_INF, _INF, True, True))
-    ok = (lo < x if lo_open else lo <= x) and (x < hi if hi_open else x <= hi)
-    if not ok or x != x:
-        lo_s = "(" if lo_open else "["
-        hi_s = ")" if hi_open else "]"
-        raise ValueError(f"hyper-parameter {key!r} must lie in {lo_s}{lo:g}, {hi:g}{hi_s}, "
-                         f"got {x!r}")
+    check_range(f"hyper-parameter {key!r}", x, lo, hi, lo_open=lo_open, hi_open=hi_open)
     return x
 
 
+def yaml_number(v):
+    """``v``, or the number a string spells: PyYAML (YAML 1.1) reads ``3e-4``, ``9e-1`` and
+    ``1e3`` as strings (its floats need a dot and a signed exponent), while scene files
+    accept that notation (``rolling_env.scenes``, which reads such strings with ``float``):
+    the hyper-parameters read it the same way.  Anything else is returned unchanged (and
+    refused by the caller, naming the key)."""
+    if isinstance(v, str):
+        try:
+            return float(v)
+        except ValueError:
+            pass
+    return v
+
+
 def _int(key, v):
-    """An integer (a float with an integer value too, for YAML's ``!!float 1e6``)."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or (
-            isinstance(v, float) and not (v == v and abs(v) != _INF and v == int(v))):
+    """An integer (a float with an integer value too, for YAML's ``!!float 1e6`` and ``1e3``),
+    never truncated."""
+    x = yaml_number(v)
+    if isinstance(x, bool) or not isinstance(x, (int, float)) or (
+            isinstance(x, float) and not (x == x and abs(x) != _INF and x == int(x))):
         raise ValueError(f"hyper-parameter {key!r} must be an integer, got {v!r}")
-    return _in_range(key, int(v))
+    return _in_range(key, int(x))
 
 
 def _number(key, v):
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
+    x = yaml_number(v)
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
         raise ValueError(f"hyper-parameter {key!r} must be a number, got {v!r}")
-    return _in_range(key, float(v))
+    return _in_range(key, float(x))
 
 
 def check_value(key: str, v, kinds: set):
@@ -200,6 +245,10 @@ def check_value(key: str, v, kinds: set):
         return None
     if "any" in kinds:
         return v
+    if isinstance(v, str) and kinds & {"float", "int"} and isinstance(yaml_number(v), float):
+        # 3e-4 (a string to PyYAML): the number, also where a string form exists (lin_<x>,
+        # auto): float() reads neither of those
+        return _number(key, v) if "float" in kinds else _int(key, v)
     if "class" in kinds and not kinds - {"class", "none"}:
         raise ValueError(f"hyper-parameter {key!r} takes a Python class: not supported in the "
                          "YAML")
@@ -262,7 +311,9 @@ def check_hyperparams(algo: str, hp: dict) -> dict:
     """Validate an entry of the hyper-parameter YAML for ``algo``: every key is either an RL
     Zoo key the script handles (``ZOO_KEYS``) or a keyword of the algorithm's ``__init__``
     (found with ``inspect.signature``), with a value of the type SB3 annotates and in
-    ``RANGES``; anything else raises a ValueError naming the key.  Returns
+    ``RANGES``; anything else raises a ValueError naming the key.  Numbers may be written in
+    exponent form (``3e-4``, ``1e3``: ``yaml_number``; an integer only with an integer value),
+    and the values inside ``policy_kwargs`` are checked too (``check_policy_kwargs``).  Returns
     ``{"n_envs", "n_timesteps", "policy", "normalize" (dict or None), "env_kwargs",
     "action_noise" (None or a (type, std) pair), "kwargs" (for the algorithm)}``;
     ``n_timesteps`` is None when the entry has none."""
@@ -295,7 +346,9 @@ def check_hyperparams(algo: str, hp: dict) -> dict:
         if bad:
             raise ValueError(f"hyper-parameter 'normalize': unknown key(s) {bad} (VecNormalize "
                              f"takes {sorted(allowed)}; gamma is the algorithm's)")
-        for k, x in norm.items():
+        for k, x in list(norm.items()):
+            if k in ("clip_obs", "clip_reward", "epsilon", "gamma"):
+                x = norm[k] = yaml_number(x)  # 1e1: a string to PyYAML
             if k in ("norm_obs", "norm_reward") and not isinstance(x, bool):
                 raise ValueError(f"hyper-parameter 'normalize': {k} must be true or false, "
                                  f"got {x!r}")
@@ -337,8 +390,117 @@ def check_hyperparams(algo: str, hp: dict) -> dict:
         if bad:
             raise ValueError(f"hyper-parameter 'policy_kwargs': unknown key(s) {bad} for "
                              f"{pol.__name__} (allowed: {sorted(allowed)})")
+        kwargs["policy_kwargs"] = check_policy_kwargs(algo, kwargs["policy_kwargs"])
     out["kwargs"] = kwargs
     return out
+
+
+# ----------------------------------------------------------------- policy_kwargs
+NET_WIDTH_MAX = 1024  # units per hidden layer (the observation has 13 numbers, the action 3)
+NET_DEPTH_MAX = 8  # hidden layers per network
+N_CRITICS_MAX = 10
+#: torch.nn.modules.activation classes that are no element-wise activation or need arguments
+_NOT_ACTIVATIONS = frozenset({"MultiheadAttention", "GLU", "Threshold", "Softmax", "Softmax2d",
+                              "Softmin", "LogSoftmax"})
+
+
+def activation_classes() -> dict:
+    """The activations ``policy_kwargs.activation_fn`` may name: the element-wise activation
+    classes of ``torch.nn`` (``torch.nn.modules.activation``, less ``_NOT_ACTIVATIONS``:
+    attention, GLU (halves its input), the softmax family (across units) and Threshold
+    (needs arguments))."""
+    import torch
+    mod = torch.nn.modules.activation
+    return {n: c for n, c in vars(mod).items()
+            if isinstance(c, type) and issubclass(c, torch.nn.Module)
+            and c.__module__ == mod.__name__ and n not in _NOT_ACTIVATIONS}
+
+
+def _layers(name: str, v) -> list:
+    ok = (isinstance(v, (list, tuple)) and len(v) <= NET_DEPTH_MAX
+          and all(isinstance(w, int) and not isinstance(w, bool) and 1 <= w <= NET_WIDTH_MAX
+                  for w in v))
+    if not ok:
+        raise ValueError(f"hyper-parameter 'policy_kwargs': {name} must be a list of at most "
+                         f"{NET_DEPTH_MAX} hidden-layer widths, each an integer in [1, "
+                         f"{NET_WIDTH_MAX}], got {v!r}")
+    return list(v)
+
+
+def check_policy_kwargs(algo: str, pk: dict) -> dict:
+    """The values of ``policy_kwargs`` for the algorithm's MlpPolicy (keys are checked by
+    ``check_hyperparams``): ``net_arch`` a list of hidden-layer widths (``_layers``) or a dict
+    of them with keys pi and vf (PPO) or pi and qf (SAC, TD3); ``activation_fn`` one of
+    ``activation_classes``; ``log_std_init`` in [LOG_STD_MIN, LOG_STD_MAX] = [-20, 2] (SB3's
+    clamp of SAC's log std; exp(1e308) made the first PPO update NaN); ``clip_mean`` in
+    (0, 100]; ``n_critics`` in [1, N_CRITICS_MAX]; ``ortho_init``, ``full_std``,
+    ``use_expln``, ``squash_output``, ``share_features_extractor``, ``normalize_images``
+    true or false; ``optimizer_class`` a torch.optim optimizer; ``optimizer_kwargs`` and
+    ``features_extractor_kwargs`` mappings; ``features_extractor_class`` not at all (the
+    YAML can name no SB3 class).  A ValueError naming policy_kwargs and the key otherwise.
+    What the values do together (e.g. an optimizer keyword) is checked by building the
+    policy (``check_policy``)."""
+    import torch
+    from stable_baselines3.sac.policies import LOG_STD_MAX, LOG_STD_MIN
+
+    from rolling_env.validation import check_int, check_range
+    heads = ("pi", "vf") if algo == "ppo" else ("pi", "qf")
+    out = dict(pk)
+    for k, v in pk.items():
+        name = f"hyper-parameter 'policy_kwargs': {k}"
+        if k == "net_arch":
+            if isinstance(v, dict):
+                bad = sorted(set(v) - set(heads), key=str)
+                if bad:
+                    raise ValueError(f"{name} as a dict takes the keys {' and '.join(heads)} "
+                                     f"(for {algo.upper()}), got {bad}")
+                out[k] = {h: _layers(f"net_arch[{h!r}]", x) for h, x in v.items()}
+            elif v is not None:
+                out[k] = _layers("net_arch", v)
+        elif k == "activation_fn":
+            allowed = activation_classes()
+            if not (isinstance(v, type) and allowed.get(v.__name__) is v):
+                raise ValueError(f"{name} must be a torch.nn activation class ("
+                                 f"{', '.join('nn.' + n for n in sorted(allowed))}), got "
+                                 f"{getattr(v, '__name__', v)!r}")
+        elif k == "log_std_init":
+            out[k] = check_range(name, yaml_number(v), LOG_STD_MIN, LOG_STD_MAX)
+        elif k == "clip_mean":
+            out[k] = check_range(name, yaml_number(v), 0.0, 100.0, lo_open=True)
+        elif k == "n_critics":
+            out[k] = check_int(name, yaml_number(v), 1, N_CRITICS_MAX)
+        elif k in ("ortho_init", "full_std", "use_expln", "squash_output",
+                   "share_features_extractor", "normalize_images"):
+            if not isinstance(v, bool):
+                raise ValueError(f"{name} must be true or false, got {v!r}")
+        elif k == "optimizer_class":
+            if not (isinstance(v, type) and issubclass(v, torch.optim.Optimizer)):
+                raise ValueError(f"{name} must be a torch.optim optimizer class such as "
+                                 f"th.optim.Adam, got {getattr(v, '__name__', v)!r}")
+        elif k in ("optimizer_kwargs", "features_extractor_kwargs"):
+            if v is not None and not (isinstance(v, dict) and all(isinstance(x, str) for x in v)):
+                raise ValueError(f"{name} must be a mapping of keywords, got {v!r}")
+        elif k == "features_extractor_class":
+            raise ValueError(f"{name} takes an SB3 features extractor class: not supported in "
+                             "the YAML (the default FlattenExtractor fits the flat observation)")
+    return out
+
+
+def check_policy(algo: str, kwargs: dict, env) -> None:
+    """Build the algorithm's MlpPolicy once on ``env``'s spaces with the checked
+    ``kwargs["policy_kwargs"]`` (and ``use_sde``, as the algorithm passes it): an error while
+    building it (a RuntimeError from torch, a TypeError or ValueError from the optimizer
+    keywords, ...) is a one-line ValueError naming policy_kwargs, before any run folder."""
+    import inspect
+    pol = _algo_class(algo).policy_aliases["MlpPolicy"]
+    pk = dict(kwargs.get("policy_kwargs") or {})
+    if "use_sde" in inspect.signature(pol.__init__).parameters:
+        pk["use_sde"] = bool(kwargs.get("use_sde", False))
+    try:
+        pol(env.observation_space, env.action_space, lambda _: 1e-3, **pk)
+    except Exception as e:  # noqa: BLE001  (whatever SB3 or torch raise: one line, named)
+        raise ValueError(f"hyper-parameter 'policy_kwargs': {pol.__name__} cannot be built "
+                         f"with {kwargs.get('policy_kwargs')!r}: {one_line(e)}") from None
 
 
 def action_noise(spec, n_actions: int = 3):

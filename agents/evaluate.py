@@ -12,7 +12,10 @@ whose statistics were saved at another step is skipped with a warning for the ne
 (atomically) and plots under ``results/plots/``: learning curves per scene and one trajectory
 per controller on the same target.  Without ``--baselines-only`` a missing ``--runs`` folder,
 or a scene without a trained agent there, is a usage error before anything is written (a
-mistyped ``--runs`` replaced the committed table with a baselines-only one).
+mistyped ``--runs`` replaced the committed table with a baselines-only one); so are a scene
+given twice in ``--scenes`` (by scene key), a run folder named like a baseline, and a damaged
+run file (config.yml, a model .zip, its VecNormalize statistics, meta.json, evaluations.npz:
+one line naming the file).  ``--episodes`` is at most ``EPISODES_MAX``.
 """
 from __future__ import annotations
 
@@ -27,13 +30,31 @@ from pathlib import Path
 import numpy as np
 
 import rolling_env
+from rolling_env.cli import positive_int
 from rolling_env.io import staged
 from rolling_env.rollout import rollout
 
 from .baselines import Eq32Design, Eq32Feedback, Eq32OpenLoop
-from .common import SAVED_AT, atomic_write, buildable_scene, scene_key
+from .common import (SAVED_AT, atomic_write, buildable_scene, one_line, run_config,
+                     scene_key)
 
 EVAL_SEED = 20261122  # held out: training uses seeds < 1e6, evaluation envs seed + 10000
+#: --episodes at most: an episode of a shipped scene (512 ticks) takes about 0.1 s per
+#: controller on the 2-core machine, so 1e5 episodes are about 3 hours per controller and
+#: scene (1e9 built arrays until the process was killed for memory)
+EPISODES_MAX = 10**5
+
+
+class MismatchedStatistics(ValueError):
+    """A model and VecNormalize statistics saved at different steps (a save interrupted
+    between the two files): the run's next model may be used instead."""
+
+
+def _load_error(path, e: BaseException) -> ValueError:
+    """A file that the library failed to load (truncated, damaged, another format): one line
+    naming the file, whatever torch, pickle or zipfile raised."""
+    return ValueError(f"{str(path)!r} cannot be loaded: it is damaged or not what "
+                      f"agents.train writes ({one_line(e)})")
 
 
 class NormalizedAgent:
@@ -83,30 +104,39 @@ def load_agent(path, env=None) -> NormalizedAgent:
     refused where its run's config.yml says the run normalised observations, and loaded with
     a warning where there is no config.yml to tell."""
     import stable_baselines3 as sb3
-    import yaml
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     from .common import parse_kwargs
 
     path = Path(path)
     cfg_path = path.parent / "config.yml"
-    cfg = (yaml.safe_load(cfg_path.read_text()) or {}) if cfg_path.exists() else None
+    cfg = run_config(path.parent)  # None without one; a damaged one is a ValueError
     algo = model_algo(path)
     if cfg is not None and cfg.get("algo", algo) != algo:
         raise ValueError(f"{path.name} was saved by {algo.upper()} but {cfg_path} says algo "
                          f"{cfg.get('algo')!r}: the model does not belong to this run")
     cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[algo]
-    model = cls.load(path, device="cpu")
+    try:
+        model = cls.load(path, device="cpu")
+    except Exception as e:  # noqa: BLE001  (a damaged policy.pth: torch's RuntimeError, ...)
+        raise _load_error(path, e) from None
     stats = path.with_name(path.stem + "_vecnormalize.pkl")
     vecnorm = None
     if stats.exists():
         scene = env.unwrapped.scene if env is not None else "default"
-        vecnorm = VecNormalize.load(str(stats), DummyVecEnv([lambda: rolling_env.make(scene)]))
+        try:
+            vecnorm = VecNormalize.load(str(stats),
+                                        DummyVecEnv([lambda: rolling_env.make(scene)]))
+        except Exception as e:  # noqa: BLE001  (truncated: UnpicklingError, EOFError, ...)
+            raise _load_error(stats, e) from None
+        if not isinstance(vecnorm, VecNormalize):  # another object pickled under the name
+            raise _load_error(stats, TypeError(f"holds a {type(vecnorm).__name__}"))
         saved_at = getattr(vecnorm, SAVED_AT, None)  # absent in files saved before the tag
         if saved_at is not None and saved_at != model.num_timesteps:
-            raise ValueError(f"{stats.name} was saved at step {saved_at} but {path.name} at "
-                             f"step {model.num_timesteps} (a save interrupted between the two "
-                             "files): they do not belong together; use another model of the run")
+            raise MismatchedStatistics(
+                f"{stats.name} was saved at step {saved_at} but {path.name} at step "
+                f"{model.num_timesteps} (a save interrupted between the two files): they do "
+                "not belong together; use another model of the run")
         vecnorm.training = False
         vecnorm.norm_reward = False
     elif cfg is not None:
@@ -179,15 +209,12 @@ def check_run_scene(run: Path, scene, by_key: bool = True) -> None:
     (a scene file whose stem names a shipped scene but whose content differs has its own
     key, ``common.scene_key``).  A run without a config.yml is not checked; one from before
     the digest was recorded is checked by the scene's name, with a warning."""
-    import yaml
-
     from rolling_env.scenes import Scene
 
     from .common import differing_fields, scene_digest, scene_fields, scene_key
-    cfg_path = run / "config.yml"
-    if not cfg_path.exists():
+    cfg = run_config(run)  # a damaged config.yml: a ValueError naming it
+    if cfg is None:
         return
-    cfg = yaml.safe_load(cfg_path.read_text()) or {}
     trained = cfg.get("scene")
     digest = cfg.get("scene_digest")
     trained_key = cfg.get("scene_key", None if trained is None else _stem(trained))
@@ -222,18 +249,25 @@ def scene_runs(scene: str, runs: Path | None) -> list[Path]:
 
 
 def controllers_for(scene: str, runs: Path | None, env) -> dict:
-    """The two baselines and every run's agent (each run checked to be trained on ``scene``);
-    ``runs`` None: the baselines alone."""
+    """The two baselines and every run's agent (each run checked to be trained on ``scene``,
+    its meta.json and evaluations.npz read); ``runs`` None: the baselines alone.  A run
+    folder named like a baseline is refused (it would replace the baseline's row); a damaged
+    file of a run is a ValueError naming it, before any episode runs."""
     ctrls = {"eq32-open-loop": Eq32OpenLoop.from_env(env),
              "eq32-feedback": Eq32Feedback.from_env(env)}
     for run in scene_runs(scene, runs):
         files = agent_files(run)
         if files:
+            if run.name in BASELINES:
+                raise ValueError(f"run folder {str(run)!r} has the name of a baseline: rename "
+                                 "it (its row would replace the baseline's)")
             check_run_scene(run, scene)
+            _budget(run)
+        learning_curve(run)  # plotted for every run folder of the scene
         for k, model in enumerate(files):
             try:
                 agent = load_agent(model, env)
-            except ValueError as e:  # a model / statistics pair that does not belong together
+            except MismatchedStatistics as e:  # a pair that does not belong together
                 if k == len(files) - 1:
                     raise
                 print(f"warning: {run}: {e}; trying {files[k + 1].name}", file=sys.stderr)
@@ -284,12 +318,41 @@ def evaluate_scene(scene: str, runs: Path, episodes: int, env=None,
 
 
 def _budget(run: Path | None) -> dict:
+    """The training budget from a run's meta.json (none without one); a ValueError naming
+    the file where it is damaged."""
+    import math
     meta = run / "meta.json" if run is not None else None
     if meta is None or not meta.exists():
         return {"train_env_steps": 0, "train_wall_seconds": 0.0, "machine": "-"}
-    m = json.loads(meta.read_text())
-    return {"train_env_steps": m["env_steps"], "train_wall_seconds": round(m["wall_seconds"], 1),
-            "machine": MACHINE}
+    try:
+        m = json.loads(meta.read_text(encoding="utf-8"))
+        steps, wall = m["env_steps"], m["wall_seconds"]
+        ok = (isinstance(steps, int) and not isinstance(steps, bool) and steps >= 0
+              and isinstance(wall, (int, float)) and not isinstance(wall, bool)
+              and math.isfinite(wall) and wall >= 0)
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise ValueError(f"{str(meta)!r} cannot be read: it is damaged or not what "
+                         f"agents.train writes ({one_line(e)})") from None
+    if not ok:
+        raise ValueError(f"{str(meta)!r}: env_steps must be an integer >= 0 and wall_seconds "
+                         f"a number >= 0, got {steps!r} and {wall!r}")
+    return {"train_env_steps": steps, "train_wall_seconds": round(wall, 1), "machine": MACHINE}
+
+
+def learning_curve(run: Path):
+    """``(env steps, mean, std)`` of the run's EvalCallback log (``evaluations.npz``), None
+    without one; a ValueError naming the file where it is damaged."""
+    ev = run / "evaluations.npz"
+    if not ev.exists():
+        return None
+    try:
+        with np.load(ev) as d:
+            steps, res = np.asarray(d["timesteps"], float), np.asarray(d["results"], float)
+        if res.ndim != 2 or steps.shape != res.shape[:1]:
+            raise ValueError(f"timesteps {steps.shape} and results {res.shape} do not match")
+    except Exception as e:  # noqa: BLE001  (zipfile, pickle, numpy: a damaged file)
+        raise _load_error(ev, e) from None
+    return steps, res.mean(axis=1), res.std(axis=1)
 
 
 COLS = ["scene", "controller", "model_file", "episodes", "tolerance", "final_abs_error_mean",
@@ -403,12 +466,11 @@ def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path) -> Path:
     ax[1].set(xlabel="t [ms]", ylabel="|error| / tolerance", ylim=(1e-2, None),
               title="tracking error (line: tolerance)")
     for run in scene_runs(scene, runs):
-        ev = run / "evaluations.npz"
-        if ev.exists():
-            d = np.load(ev)
-            mean, std = d["results"].mean(axis=1), d["results"].std(axis=1)
-            ax[2].plot(d["timesteps"], mean, label=run.name)
-            ax[2].fill_between(d["timesteps"], mean - std, mean + std, alpha=0.2)
+        curve = learning_curve(run)
+        if curve is not None:
+            steps, mean, std = curve
+            ax[2].plot(steps, mean, label=run.name)
+            ax[2].fill_between(steps, mean - std, mean + std, alpha=0.2)
     ax[2].set(xlabel="env steps", ylabel="eval return (mean ± std over episodes)",
               title="learning curves (EvalCallback)")
     if ax[2].lines:
@@ -426,7 +488,9 @@ def main(argv=None):
     p.add_argument("--scenes", nargs="+", default=rolling_env.list_scenes(),
                    help="scene names or YAML paths (default: every shipped scene)")
     p.add_argument("--runs", default="runs", help="folder of training runs (<runs>/<scene>/<run>/)")
-    p.add_argument("--episodes", type=int, default=20, help="held-out targets per scene")
+    p.add_argument("--episodes", type=positive_int("episodes", 1, EPISODES_MAX), default=20,
+                   help=f"held-out targets per scene, 1 to {EPISODES_MAX:,} (an episode takes "
+                   "about 0.1 s per controller; default 20)")
     p.add_argument("--out", default="results",
                    help="output folder of comparison.md, .csv and plots/ (default results, "
                         "relative to the current directory)")
@@ -434,13 +498,18 @@ def main(argv=None):
                    help="compare the two Eq. 32 baselines alone (no --runs needed); without it "
                         "every scene must have a trained agent under <runs>/<scene key>/")
     args = p.parse_args(argv)
-    if args.episodes < 1:
-        p.error(f"--episodes must be >= 1, got {args.episodes}")
+    keys = {}
     for scene in args.scenes:  # every scene checked before anything is written
         try:  # the scene, that it builds, and that the baselines can drive it
             Eq32Design(buildable_scene(scene))
         except ValueError as e:
             p.error(f"--scenes: {e}")
+        key = scene_key(scene)  # the rows, plot and runs folder of a scene go by its key
+        if key in keys:
+            p.error(f"--scenes: {keys[key]!r} and {scene!r} have the same scene key {key!r} "
+                    "(the same scene, or scene files with the same stem): their rows, plot and "
+                    "runs folder would collide; give each scene once")
+        keys[key] = scene
     out, runs = Path(args.out), (None if args.baselines_only else Path(args.runs))
     if runs is not None and not runs.is_dir():  # a mistyped --runs would replace the
         # committed table with a baselines-only one

@@ -11,13 +11,17 @@ EvalCallback log (evaluations.npz) and best model, periodic checkpoints, and the
 model.zip with model_vecnormalize.pkl beside it.  Every file is written atomically; Ctrl-C or
 SIGTERM saves a final checkpoint before exiting with 130 / 143 (128 + the signal).  A run
 folder that already holds files is refused (``--overwrite`` replaces it, if it is a folder
-this script created and holds only the files it writes); there is no resume:
+this script created and holds only the files it writes: the new run is trained in
+``<run>.overwrite`` beside it and replaces the earlier run only once it has finished; a
+new run that is stopped or fails leaves the earlier run as it was and its own files, a
+stopped run's checkpoint.zip among them, in ``<run>.overwrite``); there is no resume:
 a stopped run keeps its checkpoint.zip, and a new run starts from scratch in another folder.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import re
 import shutil
@@ -31,8 +35,8 @@ import yaml
 from rolling_env.cli import positive_int
 
 from .common import (ALGOS, action_noise, atomic_write, buildable_scene, check_hyperparams,
-                     load_hyperparams, make_vec_env, save_model, scene_digest, scene_fields,
-                     scene_key)
+                     check_policy, load_hyperparams, make_vec_env, save_model, scene_digest,
+                     scene_fields, scene_key)
 
 SEED_MAX = 2**31 - 1 - 10_000  # the evaluation env is seeded seed + 10000
 
@@ -50,7 +54,10 @@ def build_parser():
                    "a folder that already holds files is refused unless --overwrite")
     p.add_argument("--overwrite", action="store_true",
                    help="replace an existing run folder created by this script and holding "
-                   "only its files (deleted once the new model is built)")
+                   "only its files; the new run trains in <run-dir>.overwrite and replaces "
+                   "it only once finished (if stopped or failed, the earlier run is kept and "
+                   "the new run's files, its checkpoint.zip among them, stay in "
+                   "<run-dir>.overwrite)")
     p.add_argument("--eval-freq", type=positive_int("eval-freq", 1, 10**12), default=10000,
                    help="env steps between evaluations")
     p.add_argument("--eval-episodes", type=positive_int("eval-episodes", 1, 10**6), default=5)
@@ -136,9 +143,10 @@ def _setup(args):
     except ValueError as e:  # scene overrides in env_kwargs
         raise ValueError(f"hyper-parameter 'env_kwargs': {e}") from None
     trained = env.venv.core.scene  # with the overrides of env_kwargs applied
+    check_policy(args.algo, checked["kwargs"], env)  # torch's errors named policy_kwargs
     eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs)
     run = Path(args.run_dir or f"runs/{key}/{args.algo}_seed{args.seed}")
-    replace = False
+    work = run  # the folder trained into: the run folder, or its staging folder
     if run.is_symlink() or (run.exists() and (not run.is_dir() or any(run.iterdir()))):
         # a second run into the same folder would mix its files with the first's (and its
         # first checkpoint would overwrite an interrupted run's): refuse, keep what is there
@@ -149,7 +157,11 @@ def _setup(args):
         if why:
             raise UsageError(f"--overwrite replaces only a run folder written by this script; "
                              f"{str(run)!r} {why}: nothing was deleted")
-        replace = True
+        work = staging_folder(run)  # the earlier run stays until the new one has finished
+        if work.exists() or work.is_symlink():
+            raise UsageError(f"--overwrite trains into {str(work)!r} first, and it exists "
+                             "(left by an interrupted or failed --overwrite run, with its "
+                             "checkpoint): move or delete it first; nothing was deleted")
     norm = checked["normalize"]
     if norm is not None:
         env = VecNormalize(env, gamma=float(checked["kwargs"].get("gamma", 0.99)), **norm)
@@ -161,12 +173,10 @@ def _setup(args):
         kwargs["action_noise"] = action_noise(checked["action_noise"])
     cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[args.algo]
     model = cls(checked["policy"], env, seed=args.seed, verbose=0, device="cpu",
-                tensorboard_log=str(run / "tb"),
+                tensorboard_log=str(work / "tb"),
                 policy_kwargs=checked["kwargs"].get("policy_kwargs"), **kwargs)
-    if replace:  # checked by _not_a_run above; an empty folder is simply used
-        shutil.rmtree(run)
-    run.mkdir(parents=True, exist_ok=True)
-    atomic_write(run / RUN_MARKER, lambda p: Path(p).write_text(
+    work.mkdir(parents=True, exist_ok=True)  # an empty run folder is simply used
+    atomic_write(work / RUN_MARKER, lambda p: Path(p).write_text(
         "a run folder of agents.train: --overwrite may replace it\n"))
     # what the run was trained on, for evaluate and rollout to check: the scene as given, its
     # key (runs/<key>/), and the checked scene's fields with their digest (a scene file's
@@ -174,9 +184,43 @@ def _setup(args):
     cfg = dict(hp, n_envs=n_envs, n_timesteps=n_timesteps, algo=args.algo, scene=str(scene),
                seed=args.seed, env_kwargs=dict(env_kwargs, scene=str(scene)), scene_key=key,
                scene_digest=scene_digest(trained), scene_fields=scene_fields(trained))
-    atomic_write(run / "config.yml", lambda p: Path(p).write_text(yaml.safe_dump(cfg)))
-    atomic_write(run / "command.txt", lambda p: Path(p).write_text(" ".join(sys.argv) + "\n"))
-    return model, eval_env, run, n_envs, n_timesteps, trained
+    atomic_write(work / "config.yml", lambda p: Path(p).write_text(yaml.safe_dump(cfg)))
+    atomic_write(work / "command.txt", lambda p: Path(p).write_text(" ".join(sys.argv) + "\n"))
+    return model, eval_env, run, work, n_envs, n_timesteps, trained
+
+
+def staging_folder(run: Path) -> Path:
+    """Where ``--overwrite`` trains before it replaces ``run``: ``<run>.overwrite`` beside it
+    (a stopped or failed run's files, its checkpoint among them, stay there)."""
+    return run.with_name(run.name + ".overwrite")
+
+
+def _replace_run(run: Path, work: Path) -> None:
+    """Put the finished run in ``work`` in place of the earlier run ``run`` (checked again by
+    ``_not_a_run``: it may have changed while training): two renames with SIGINT and SIGTERM
+    held back between them, then the earlier run is deleted.  Where the earlier run may not
+    be replaced any more, both are kept and a UsageError says where the new one is."""
+    if not run.exists() and not run.is_symlink():  # deleted while training
+        os.rename(work, run)
+        return
+    why = _not_a_run(run)
+    if why:
+        raise UsageError(f"the new run is complete in {str(work)!r}, but {str(run)!r} {why} "
+                         "now (changed while training): nothing was deleted")
+    old = run.with_name(f".{run.name}.replaced-{os.getpid()}")
+    held = {signal.SIGINT, signal.SIGTERM}
+    mask = getattr(signal, "pthread_sigmask", lambda how, sigs: None)  # POSIX only
+    mask(signal.SIG_BLOCK, held)
+    try:
+        os.rename(run, old)
+        try:
+            os.rename(work, run)
+        except BaseException:
+            os.rename(old, run)
+            raise
+        shutil.rmtree(old)
+    finally:
+        mask(signal.SIG_UNBLOCK, held)
 
 
 RUN_MARKER = "rolling-drive-run.txt"  # written when the script creates a run folder
@@ -228,7 +272,7 @@ def train(args) -> Path:
 
     torch.set_num_threads(1)
     try:  # an error while learning is not a usage error: it propagates with its traceback
-        model, eval_env, run, n_envs, n_timesteps, trained = _setup(args)
+        model, eval_env, run, work, n_envs, n_timesteps, trained = _setup(args)
     except KeyError as e:
         raise UsageError(f"hyper-parameter {e.args[0]!r} missing from "
                          f"{args.conf or 'configs/hyperparams'}") from e
@@ -238,8 +282,8 @@ def train(args) -> Path:
                          else str(e)) from e
     scene = args.scene
     callbacks = CallbackList([
-        _eval_callback(eval_env, run, max(args.eval_freq // n_envs, 1), args.eval_episodes),
-        _AtomicCheckpoint.make(run, max(args.checkpoint_freq, 1)),
+        _eval_callback(eval_env, work, max(args.eval_freq // n_envs, 1), args.eval_episodes),
+        _AtomicCheckpoint.make(work, max(args.checkpoint_freq, 1)),
     ])
 
     received = []
@@ -255,11 +299,16 @@ def train(args) -> Path:
                     tb_log_name=args.algo)
     except KeyboardInterrupt:
         interrupted = True
+    except BaseException:
+        if work != run:
+            print(f"python -m agents.train: the earlier run in {str(run)!r} is kept; this "
+                  f"run's files are in {str(work)!r}", file=sys.stderr)
+        raise
     finally:
         signal.signal(signal.SIGTERM, old)
-        shutil.rmtree(run / ".eval_scratch", ignore_errors=True)
+        shutil.rmtree(work / ".eval_scratch", ignore_errors=True)
     wall = time.perf_counter() - t0
-    save_model(model, model.get_vec_normalize_env(), run,
+    save_model(model, model.get_vec_normalize_env(), work,
                "checkpoint" if interrupted else "model")
     meta = {
         "algo": args.algo, "scene": str(scene), "scene_key": scene_key(scene),
@@ -268,17 +317,21 @@ def train(args) -> Path:
         "wall_seconds": wall, "interrupted": interrupted, "n_envs": n_envs,
         "rolling_drive": rolling_env.__version__, "stable_baselines3": sb3.__version__,
         "torch": torch.__version__, "python": platform.python_version(),
-        "machine": f"{platform.machine()}, {__import__('os').cpu_count()} CPU cores, no GPU",
+        "machine": f"{platform.machine()}, {os.cpu_count()} CPU cores, no GPU",
     }
-    atomic_write(run / "meta.json", lambda p: Path(p).write_text(json.dumps(meta, indent=1)))
+    atomic_write(work / "meta.json", lambda p: Path(p).write_text(json.dumps(meta, indent=1)))
     print(json.dumps(meta))
     if interrupted:  # saved, but not finished: the shell convention 128 + signal number
-        raise Interrupted(128 + (received[0] if received else signal.SIGINT))
+        raise Interrupted(128 + (received[0] if received else signal.SIGINT), work,
+                          run if work != run else None)
+    if work != run:
+        _replace_run(run, work)
     return run
 
 
 class Interrupted(Exception):
-    """Training stopped by SIGINT/SIGTERM after its checkpoint was saved; args[0] = exit code."""
+    """Training stopped by SIGINT/SIGTERM after its checkpoint was saved; args: the exit code,
+    the folder holding checkpoint.zip, and the earlier run kept (--overwrite) or None."""
 
 
 def main(argv=None):
@@ -289,8 +342,11 @@ def main(argv=None):
         print(f"python -m agents.train: error: {e}", file=sys.stderr)
         return 2
     except Interrupted as e:  # checkpoint saved; a scheduler must not take the run as done
-        print("python -m agents.train: interrupted; checkpoint.zip saved", file=sys.stderr)
-        return e.args[0]
+        code, work, kept = e.args
+        print(f"python -m agents.train: interrupted; checkpoint.zip saved in {str(work)!r}"
+              + (f" (the earlier run in {str(kept)!r} is kept)" if kept else ""),
+              file=sys.stderr)
+        return code
     return 0
 
 

@@ -199,7 +199,7 @@ def load_scene(scene: str | os.PathLike | dict | Scene = "default", **overrides)
                                  f"{', '.join(list_scenes())} (or give a path to a .yaml file)")
         if not path.exists():
             raise ValueError(f"scene file {str(path)!r} does not exist")
-        raw = _read_yaml(path)
+        raw = read_yaml(path)
         if not isinstance(raw, dict):
             raise ValueError(f"scene file {str(path)!r} must hold a mapping of keys to values")
         raw.setdefault("name", path.stem)
@@ -234,20 +234,22 @@ class _UniqueKeyLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep=deep)
 
 
-def _read_yaml(path: Path):
-    """The YAML document in ``path``; a syntax error or a duplicate key is a ValueError naming
-    the file and the line."""
+def read_yaml(path, what: str = "scene file"):
+    """The YAML document in ``path``; a syntax error, a duplicate key (``_UniqueKeyLoader``),
+    text that is not UTF-8 or a file that cannot be read is a one-line ValueError naming
+    ``what`` and the file (and the line, for YAML errors).  Scene files, the hyper-parameter
+    files and run configs of ``agents`` are read with it."""
     try:
         with open(path, encoding="utf-8") as f:
             return yaml.load(f, Loader=_UniqueKeyLoader)
     except yaml.YAMLError as e:
         msg = " ".join(str(e).split())
-        raise ValueError(f"scene file {str(path)!r} is not valid YAML: {msg}") from None
+        raise ValueError(f"{what} {str(path)!r} is not valid YAML: {msg}") from None
     except UnicodeDecodeError as e:
-        raise ValueError(f"scene file {str(path)!r} is not UTF-8 text (byte {e.start}: "
+        raise ValueError(f"{what} {str(path)!r} is not UTF-8 text (byte {e.start}: "
                          f"{e.reason})") from None
     except OSError as e:  # a folder, no permission, ...
-        raise ValueError(f"scene file {str(path)!r} cannot be read: "
+        raise ValueError(f"{what} {str(path)!r} cannot be read: "
                          f"{e.strerror or e.__class__.__name__}") from None
 
 

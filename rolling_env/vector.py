@@ -91,7 +91,6 @@ class BatchCore(CellViews):
         self.drive = drive  # template (grid, scales)
         self.features = drive.kernel_features + (None,)  # (mu, mass, load, ledger)
         self.sv = EK.scene_vector(self.scene, self.a_max, drive)
-        m = drive.grid.n
         _check_memory(n, drive.cells.nbytes, self.scene)
         self.cells = np.zeros((n,) + drive.cells.shape)  # per env: U, A, B (and L), see _kernel
         self.st = np.zeros((n, K.N_STATE))

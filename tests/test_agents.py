@@ -638,8 +638,8 @@ def test_rollout_cli_refuses_a_model_of_another_scene_and_names_files_by_run(tra
     ({"n_epoch": 1, "learning_rte": 0.5}, "'learning_rte', 'n_epoch'"),
     ({"n_envs": 2.7}, "'n_envs' must be an integer"),
     ({"n_timesteps": 300.9}, "'n_timesteps' must be an integer"),
-    ({"gamma": 1.5}, "'gamma' must lie in (0, 1]"),
-    ({"learning_rate": -1e-3}, "'learning_rate' must lie in (0, inf)"),
+    ({"gamma": 1.5}, "'gamma' must be in (0, 1]"),
+    ({"learning_rate": -1e-3}, "'learning_rate' must be in (0, inf)"),
     ({"learning_rate": "lin_x"}, "'learning_rate' must be a number or 'lin_<number>'"),
     ({"n_steps": "many"}, "'n_steps' must be an integer"),
     ({"use_sde": "yes"}, "'use_sde' must be true or false"),
@@ -824,3 +824,273 @@ def test_evaluate_without_agents_refuses_unless_baselines_only(tmp_path, capsys)
     with open(out / "comparison.csv") as f:
         rows = list(csv.DictReader(f))
     assert [r["controller"] for r in rows] == ["eq32-open-loop", "eq32-feedback"], rows
+
+
+# ----------------------------------------------------------------- inputs (audit)
+def test_evaluate_bounds_episodes(tmp_path, capsys, monkeypatch):
+    """--episodes 1000000000 had no upper bound: the held-out targets were built until the
+    process was killed for memory.  Now exit 2 at parse time naming --episodes and its range
+    (1 to EPISODES_MAX), before any target is drawn or file written."""
+    import agents.evaluate as ev
+
+    def reached(*a, **k):
+        raise AssertionError("the evaluation started with an unbounded --episodes")
+    monkeypatch.setattr(ev, "held_out_targets", reached)
+    for bad in ("1000000000", "100001", "0", "-3", "2.5"):
+        with pytest.raises(SystemExit) as e:
+            ev.main(["--baselines-only", "--scenes", "default", "--episodes", bad,
+                     "--out", str(tmp_path / "out")])
+        err = capsys.readouterr().err
+        last = err.strip().splitlines()[-1]
+        assert e.value.code == 2 and "--episodes" in last, f"{bad}: {err}"
+        assert bad == "2.5" or "[1, 100000]" in last, f"{bad}: {err}"
+    assert not (tmp_path / "out").exists()
+
+
+def test_evaluate_refuses_duplicate_scenes(tmp_path, capsys):
+    """--scenes default default evaluated the scene twice and wrote duplicate rows: refused
+    naming --scenes, also where two spellings (name, path of the shipped file) have one key."""
+    from agents.evaluate import main as evaluate_main
+    shipped = str(rolling_env.scenes.SCENE_DIR / "default.yaml")
+    for scenes in (["default", "default"], ["default", "heavy_inf_friction", shipped]):
+        with pytest.raises(SystemExit) as e:
+            evaluate_main(["--baselines-only", "--scenes", *scenes, "--episodes", "1",
+                           "--out", str(tmp_path / "out")])
+        last = capsys.readouterr().err.strip().splitlines()[-1]
+        assert e.value.code == 2 and "--scenes:" in last and "same scene key 'default'" in last, (
+            f"{scenes}: {last}")
+    assert not (tmp_path / "out").exists()
+
+
+def test_evaluate_refuses_a_run_named_like_a_baseline(trained_run, tmp_path, capsys):
+    """A run folder named eq32-feedback replaced the baseline's row silently."""
+    import shutil
+
+    from agents.evaluate import main as evaluate_main
+    scene, runs = trained_run
+    shutil.copytree(runs / "myscene" / "ppo_seed0", tmp_path / "runs" / "myscene" / "eq32-feedback")
+    with pytest.raises(SystemExit) as e:
+        evaluate_main(["--scenes", str(scene), "--runs", str(tmp_path / "runs"), "--episodes",
+                       "1", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "has the name of a baseline" in err, err
+
+
+def _damage(run: Path, kind: str) -> str:
+    """Damage one file of a copied run folder; returns the name of the damaged file."""
+    import zipfile
+    cfg = run / "config.yml"
+    if kind == "yaml":
+        cfg.write_text("scene: [\n")
+    elif kind == "list":
+        cfg.write_text("- 1\n- 2\n")
+    elif kind == "env_kwargs":
+        cfg.write_text(yaml.safe_dump(dict(yaml.safe_load(cfg.read_text()), env_kwargs=[1, 2])))
+    elif kind == "utf8":
+        cfg.write_bytes(b"scene: \xff\xfe\n")
+    elif kind == "pkl":
+        stats = run / "model_vecnormalize.pkl"
+        stats.write_bytes(stats.read_bytes()[:len(stats.read_bytes()) // 2])
+        return stats.name
+    elif kind == "pth":
+        good = run / "model.zip"
+        bad = run / "bad.zip"
+        with zipfile.ZipFile(good) as zi, zipfile.ZipFile(bad, "w") as zo:
+            for item in zi.infolist():
+                data = zi.read(item.filename)
+                zo.writestr(item, data[:len(data) // 2] if item.filename == "policy.pth" else data)
+        bad.replace(good)
+        return good.name
+    elif kind == "meta":
+        (run / "meta.json").write_text('{"env_steps": 64, "wall')
+        return "meta.json"
+    elif kind == "npz":
+        ev = run / "evaluations.npz"
+        ev.write_bytes(ev.read_bytes()[:100])
+        return ev.name
+    return cfg.name
+
+
+@pytest.mark.parametrize("kind", ["yaml", "list", "env_kwargs", "utf8", "pkl", "pth", "meta",
+                                  "npz"])
+def test_damaged_run_files_are_one_line_naming_the_file(trained_run, tmp_path, capsys, kind):
+    """A config.yml that is invalid YAML, a list, has env_kwargs [1, 2] or is not UTF-8, a
+    truncated model_vecnormalize.pkl, a model.zip with a damaged policy.pth (and, for
+    evaluate, a damaged meta.json or evaluations.npz) gave raw tracebacks, exit 1: now one
+    line naming the file, exit 2, in `rolling-drive rollout` and `agents.evaluate`, with
+    nothing written."""
+    import shutil
+
+    from agents.evaluate import main as evaluate_main
+    from rolling_env.cli import main as cli_main
+    scene, runs = trained_run
+    run = tmp_path / "runs" / "myscene" / "ppo_seed0"
+    shutil.copytree(runs / "myscene" / "ppo_seed0", run)
+    for f in run.glob("best_model*"):  # model.zip is the file used
+        f.unlink()
+    name = _damage(run, kind)
+    out = tmp_path / "out"
+    if kind not in ("meta", "npz"):  # the rollout reads neither
+        code = cli_main(["rollout", "--scene", str(scene), "--controller",
+                         str(run / "model.zip"), "--out", str(out)])
+        err = capsys.readouterr().err
+        assert code == 2 and err.count("\n") == 1, f"{kind}: exit {code}: {err}"
+        assert err.startswith("rolling-drive rollout: error:") and name in err, f"{kind}: {err}"
+    with pytest.raises(SystemExit) as e:
+        evaluate_main(["--scenes", str(scene), "--runs", str(tmp_path / "runs"),
+                       "--episodes", "1", "--out", str(out)])
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert e.value.code == 2 and name in last and "Traceback" not in last, f"{kind}: {last}"
+    assert not [p for p in out.rglob("*") if p.is_file()], f"{kind}: files written"
+
+
+@pytest.mark.parametrize("algo,policy_kwargs,name", [
+    ("ppo", "dict(net_arch=[-5])", "net_arch must be a list"),
+    ("ppo", "dict(net_arch=[100000, 100000])", "each an integer in [1, 1024]"),
+    ("ppo", "dict(net_arch=[0])", "net_arch must be a list"),
+    ("ppo", "dict(net_arch=[8, 8, 8, 8, 8, 8, 8, 8, 8])",
+     "at most 8 hidden-layer widths"),
+    ("ppo", "dict(net_arch=dict(pi=[64], qf=[64]))", "takes the keys pi and vf"),
+    ("sac", "dict(net_arch=dict(pi=[64], vf=[64]))", "takes the keys pi and qf"),
+    ("ppo", "dict(log_std_init=1e308)", "log_std_init must be in [-20, 2]"),
+    ("ppo", "dict(activation_fn=nn.Dropout)", "activation_fn must be a torch.nn activation"),
+    ("ppo", "dict(activation_fn=nn.GLU)", "activation_fn must be a torch.nn activation"),
+    ("ppo", "dict(activation_fn=th.optim.Adam)", "activation_fn must be a torch.nn activation"),
+    ("ppo", "dict(ortho_init=2)", "ortho_init must be true or false"),
+    ("sac", "dict(n_critics=0)", "n_critics must be an integer in [1, 10]"),
+    ("td3", "dict(optimizer_class=nn.ReLU)", "optimizer_class must be a torch.optim"),
+    ("ppo", "dict(optimizer_kwargs=dict(weight_decay=-1))",
+     "ActorCriticPolicy cannot be built with"),
+    ("sac", "dict(optimizer_kwargs=dict(bogus=1))", "SACPolicy cannot be built with"),
+])
+def test_train_validates_policy_kwargs_values(algo, policy_kwargs, name, tmp_path, capsys):
+    """Bad values inside policy_kwargs reached torch: a negative width (RuntimeError), a huge
+    allocation, NaN in the first update from log_std_init 1e308 (exit 1, a run folder with
+    no model); net_arch [0], nn.Dropout and ortho_init 2 were accepted.  Now one line naming
+    policy_kwargs, exit 2, no run folder; what only building the policy finds (an optimizer
+    keyword) too."""
+    from agents.train import main as train_main
+    conf = tmp_path / f"{algo}.yml"
+    entry = {"n_envs": 1, "n_timesteps": 64, "policy_kwargs": policy_kwargs}
+    if algo != "ppo":
+        entry.update(buffer_size=100, learning_starts=8)
+    conf.write_text(yaml.safe_dump({"default": entry}))
+    assert train_main(["--algo", algo, "--conf", str(conf), "--run-dir", str(tmp_path / "run"),
+                       "--no-progress"]) == 2, f"{policy_kwargs} was accepted"
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "hyper-parameter 'policy_kwargs'" in err and name in err, err
+    assert not (tmp_path / "run").exists()
+
+
+def test_shipped_policy_kwargs_and_valid_ones_pass():
+    """The shipped configs, and valid values of every kind the check knows, pass unchanged."""
+    import torch
+
+    from agents.common import check_hyperparams
+    for algo in ("ppo", "sac", "td3"):
+        for key in ("RollingDrive-v0", *rolling_env.list_scenes()):
+            check_hyperparams(algo, load_hyperparams(algo, key))
+    pk = check_hyperparams("sac", {"n_timesteps": 8, "policy_kwargs": (
+        f"dict(net_arch=dict(pi={[1024] * 8}, qf=[]), activation_fn=nn.SiLU, log_std_init=-20, "
+        "n_critics=10, clip_mean=1.5, use_expln=True, optimizer_class=th.optim.AdamW, "
+        "optimizer_kwargs=dict(weight_decay=0.01))")})["kwargs"]["policy_kwargs"]
+    assert pk["activation_fn"] is torch.nn.SiLU and pk["net_arch"]["pi"] == [1024] * 8, pk
+
+
+def test_exponent_numbers_in_hyperparameter_yaml(tmp_path):
+    """PyYAML reads 3e-4, 9e-1 and 1e3 as strings: they were refused as 'must be a number,
+    got '3e-4''.  They are numbers now, as in scene files; n_timesteps 1e3 is the integer
+    1000, and 1.5e0 for an integer is still refused."""
+    from agents.common import check_hyperparams
+    from agents.train import _setup, build_parser
+    conf = tmp_path / "ppo.yml"
+    conf.write_text("default:\n  n_timesteps: 1e3\n  n_envs: 1\n  learning_rate: 3e-4\n"
+                    "  gamma: 9e-1\n  n_steps: 6.4e+1\n  batch_size: 32\n  ent_coef: 1e-3\n"
+                    "  clip_range: lin_2e-1\n  policy_kwargs: {net_arch: [8], log_std_init: -1e0}\n"
+                    "  normalize: {norm_obs: true, clip_obs: 1e1}\n")
+    hp = load_hyperparams("ppo", "default", conf)
+    assert hp["learning_rate"] == "3e-4", "the YAML parser's reading changed: the test is moot"
+    checked = check_hyperparams("ppo", hp)
+    kw = checked["kwargs"]
+    assert checked["n_timesteps"] == 1000 and type(checked["n_timesteps"]) is int, checked
+    assert kw["learning_rate"] == 3e-4 and kw["gamma"] == 0.9 and kw["n_steps"] == 64, kw
+    assert kw["ent_coef"] == 1e-3 and kw["policy_kwargs"]["log_std_init"] == -1.0, kw
+    assert checked["normalize"]["clip_obs"] == 10.0, checked["normalize"]
+    args = build_parser().parse_args(["--algo", "ppo", "--conf", str(conf), "--run-dir",
+                                      str(tmp_path / "run"), "--no-progress"])
+    model = _setup(args)[0]
+    assert model.learning_rate == 3e-4 and model.gamma == 0.9 and model.n_steps == 64
+    for key, value, msg in (("n_timesteps", "1.5e0", "'n_timesteps' must be an integer"),
+                            ("gamma", "2e0", "'gamma' must be in (0, 1]"),
+                            ("learning_rate", "nan", "'learning_rate' must be in (0, inf)")):
+        with pytest.raises(ValueError) as e:
+            check_hyperparams("ppo", {"n_timesteps": 8, key: value})
+        assert msg in str(e.value), str(e.value)
+
+
+def _overwrite_argv(run):
+    return ["--algo", "ppo", "--n-timesteps", "64", "--n-envs", "1", "--eval-freq", "64",
+            "--eval-episodes", "1", "--no-progress", "--run-dir", str(run)]
+
+
+def test_overwrite_keeps_the_earlier_run_when_the_new_one_fails(tmp_path, monkeypatch, capsys):
+    """--overwrite deleted the earlier run before learning: a rerun that failed while
+    learning destroyed the good model.  The new run trains in <run>.overwrite and replaces
+    the earlier one only once finished; a failed one leaves the earlier run as it was (and
+    its own files in <run>.overwrite, which a further --overwrite refuses to clobber)."""
+    import shutil
+
+    import stable_baselines3 as sb3
+
+    from agents.train import main as train_main
+    from agents.train import staging_folder
+    run = tmp_path / "run"
+    assert train_main(_overwrite_argv(run)) == 0
+    before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    learn = sb3.PPO.learn
+
+    def boom(self, *a, **k):
+        raise RuntimeError("raised inside learn")
+    monkeypatch.setattr(sb3.PPO, "learn", boom)
+    with pytest.raises(RuntimeError, match="raised inside learn"):
+        train_main(_overwrite_argv(run) + ["--overwrite"])
+    after = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    assert after == before, "the earlier run was changed by a failed --overwrite"
+    staging = staging_folder(run)
+    assert staging == tmp_path / "run.overwrite" and (staging / "config.yml").exists()
+    assert "the earlier run in" in capsys.readouterr().err
+    monkeypatch.setattr(sb3.PPO, "learn", learn)
+    assert train_main(_overwrite_argv(run) + ["--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert "run.overwrite" in err and "nothing was deleted" in err, err
+    shutil.rmtree(staging)
+    assert train_main(_overwrite_argv(run) + ["--overwrite"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"], "staging or old run left"
+    assert (run / "model.zip").read_bytes() != before["model.zip"], "not replaced"
+    load_agent(run / "model.zip", rolling_env.make("default"))
+
+
+def test_overwrite_stopped_by_sigterm_keeps_both_runs(tmp_path):
+    """SIGTERM during an --overwrite run: exit 143, the earlier run untouched, and the new
+    run's loadable checkpoint in <run>.overwrite (where the message says it is)."""
+    from agents.train import main as train_main
+    run = tmp_path / "run"
+    assert train_main(_overwrite_argv(run)) == 0
+    before = (run / "model.zip").read_bytes()
+    proc = subprocess.Popen(_train(tmp_path, "--overwrite", timesteps=10 ** 7), cwd=REPO,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    staging = tmp_path / "run.overwrite"
+    deadline = time.time() + 120
+    while not (staging / "evaluations.npz").exists() and time.time() < deadline:
+        time.sleep(0.5)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 128 + signal.SIGTERM, err[-2000:]
+    assert str(staging) in err and "is kept" in err, err[-2000:]
+    assert (run / "model.zip").read_bytes() == before, "the earlier run was changed"
+    assert not json.loads((run / "meta.json").read_text())["interrupted"]
+    assert json.loads((staging / "meta.json").read_text())["interrupted"]
+    env = rolling_env.make("default")
+    agent = load_agent(staging / "checkpoint.zip", env)
+    a, _ = agent.predict(env.reset(seed=0)[0])
+    assert env.action_space.contains(np.asarray(a, np.float32))

@@ -11,8 +11,7 @@ import pytest
 
 import rolling_env
 import rolling_env._envkernel as EK
-from rolling_env.vector import (PARALLEL_MIN_ENVS, BatchCore, RollingDriveVecEnv,
-                                RollingDriveVectorEnv)
+from rolling_env.vector import PARALLEL_MIN_ENVS, BatchCore, RollingDriveVecEnv
 
 STEPS = 40  # with max_episode_steps = 15: crosses two episode boundaries
 # batch sizes that take the serial and the threaded kernel (``PARALLEL_MIN_ENVS``)

@@ -107,7 +107,7 @@ def _simulate(args):
 def _mindlin(args):
     r = ex.mindlin(args.mu, points=args.points, resolution=args.resolution)
     err = max(abs(a - b) for a, b in zip(r["T_over_muN"], r["analytic"]))
-    human = "\n".join([f"u/u*     T/(mu N) sim   analytic"] +
+    human = "\n".join(["u/u*     T/(mu N) sim   analytic"] +
                       [f"{u:7.3f}  {t:12.6f}  {a:9.6f}" for u, t, a in
                        zip(r["u_over_ustar"], r["T_over_muN"], r["analytic"])] +
                       [f"max |error| {err:.2e}"])
