@@ -475,6 +475,9 @@ def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path) -> Path:
               title="learning curves (EvalCallback)")
     if ax[2].lines:
         ax[2].legend(fontsize=7)
+    else:  # --baselines-only, or runs without an EvalCallback log: say so, not a blank panel
+        ax[2].text(0.5, 0.5, "no learning curves\n(baselines only, or no evaluations.npz)",
+                   ha="center", va="center", transform=ax[2].transAxes, fontsize=9)
     fig.tight_layout()
     path = atomic_write(out / "plots" / f"{scene_key(scene)}.png",
                         lambda p: fig.savefig(p, dpi=80, format="png"))
