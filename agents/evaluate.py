@@ -242,10 +242,14 @@ def check_run_scene(run: Path, scene, by_key: bool = True) -> None:
 
 def scene_runs(scene: str, runs: Path | None) -> list[Path]:
     """The run folders of a scene: ``<runs>/<scene key>/*/`` (the training script's layout;
-    the key of a scene file is its stem); none when ``runs`` is None (baselines only)."""
+    the key of a scene file is its stem); none when ``runs`` is None (baselines only).
+    Hidden folders (an earlier run ``agents.train --overwrite`` could not delete) and
+    ``*.overwrite`` folders (a replacement run that failed or was stopped) are not runs."""
     if runs is None:
         return []
-    return sorted(p for p in (runs / scene_key(scene)).glob("*") if p.is_dir())
+    return sorted(p for p in (runs / scene_key(scene)).glob("*")
+                  if p.is_dir() and not p.name.startswith(".")
+                  and not p.name.endswith(".overwrite"))
 
 
 def controllers_for(scene: str, runs: Path | None, env) -> dict:

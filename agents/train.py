@@ -198,8 +198,9 @@ def staging_folder(run: Path) -> Path:
 def _replace_run(run: Path, work: Path) -> None:
     """Put the finished run in ``work`` in place of the earlier run ``run`` (checked again by
     ``_not_a_run``: it may have changed while training): two renames with SIGINT and SIGTERM
-    held back between them, then the earlier run is deleted.  Where the earlier run may not
-    be replaced any more, both are kept and a UsageError says where the new one is."""
+    held back between them, then the earlier run is deleted (a failure there only warns).
+    Where the earlier run may not be replaced any more, both are kept and a UsageError says
+    where the new one is."""
     if not run.exists() and not run.is_symlink():  # deleted while training
         os.rename(work, run)
         return
@@ -218,9 +219,14 @@ def _replace_run(run: Path, work: Path) -> None:
         except BaseException:
             os.rename(old, run)
             raise
-        shutil.rmtree(old)
     finally:
         mask(signal.SIG_UNBLOCK, held)
+    try:  # signals no longer held: deleting a large tb/ takes a while
+        shutil.rmtree(old)
+    except OSError as e:  # the new run is in place: warn, leave the hidden folder
+        print(f"python -m agents.train: warning: the new run is in {str(run)!r}, but the "
+              f"earlier run left in {str(old)!r} could not be deleted ({e.strerror or e})",
+              file=sys.stderr)
 
 
 RUN_MARKER = "rolling-drive-run.txt"  # written when the script creates a run folder

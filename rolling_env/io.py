@@ -157,23 +157,22 @@ def _give_mode(tmp, path: Path) -> None:
 
 def check_writable(path, folder: bool = False, name: str = "out") -> Path:
     """Raise OSError naming ``name`` unless the folder ``path`` (``folder``) or the folder of
-    the file ``path`` can take new files (made if missing): for a command to call before it
-    computes anything, so that an unwritable --out fails at once, not after the work."""
+    the file ``path`` can take new files: for a command to call before it computes anything,
+    so that an unwritable --out fails at once, not after the work.  Creates nothing: it
+    probes the nearest folder that exists with a temporary file (the writes make the missing
+    folders below it, as before)."""
     path = Path(path)
     d = path if folder else path.parent
-    for up in (d, *d.parents):
-        if up.exists():
-            if not up.is_dir():
-                raise NotADirectoryError(f"--{name}: cannot write {str(path)!r}: {str(up)!r} "
-                                         "is a file, not a folder")
-            break
+    up = next((p for p in (d, *d.parents) if p.exists() or p.is_symlink()), Path("."))
+    if not up.is_dir():
+        raise NotADirectoryError(f"--{name}: cannot write {str(path)!r}: {str(up)!r} is a file, "
+                                 "not a folder")
     try:
-        d.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=d, prefix=".probe."):
+        with tempfile.NamedTemporaryFile(dir=up, prefix=".probe."):
             pass
     except OSError as e:
-        raise OSError(f"--{name}: cannot write to the folder {str(d)!r}: "
-                      f"{e.strerror or e}") from None
+        raise OSError(f"--{name}: cannot write {str(path)!r}: the folder {str(up)!r} takes no "
+                      f"new files ({e.strerror or e})") from None
     return path
 
 

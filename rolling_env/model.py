@@ -238,19 +238,19 @@ class Drive(CellViews):
                              "was built for (pass c0 inside it, or build the Drive with a stroke "
                              "that contains c0)") from None
         check_range("vstar0", vstar0, -_INF, _INF, lo_open=True, hi_open=True)
+        m = self.params.m
+        kin0 = 0.0
+        if math.isfinite(m):  # the ledger starts from the runner's kinetic energy
+            kin0 = 0.5 * m * vstar0 * vstar0 / self.W0
+            if not math.isfinite(kin0):  # refused before the state changes
+                raise ValueError(f"vstar0 = {vstar0:g} m/s gives the runner (m = {m:g} kg) a "
+                                 "kinetic energy beyond the float range; choose a smaller "
+                                 "vstar0")
         self.U[:] = 0.0
         self.st[:] = 0.0
         self.st[K.ST_C] = c0 / self.L0
         self.st[K.ST_VS] = vstar0 * self.t0 / self.L0
-        m = self.params.m
-        if math.isfinite(m):  # the ledger starts from the runner's kinetic energy
-            kin0 = 0.5 * m * vstar0 * vstar0 / self.W0
-            if not math.isfinite(kin0):
-                self.st[:] = 0.0
-                raise ValueError(f"vstar0 = {vstar0:g} m/s gives the runner (m = {m:g} kg) a "
-                                 "kinetic energy beyond the float range; choose a smaller "
-                                 "vstar0")
-            self.st[K.ST_KIN0] = kin0
+        self.st[K.ST_KIN0] = kin0
 
     def get_state(self) -> tuple[np.ndarray, np.ndarray]:
         return self.U.copy(), self.st.copy()

@@ -1094,3 +1094,16 @@ def test_overwrite_stopped_by_sigterm_keeps_both_runs(tmp_path):
     agent = load_agent(staging / "checkpoint.zip", env)
     a, _ = agent.predict(env.reset(seed=0)[0])
     assert env.action_space.contains(np.asarray(a, np.float32))
+
+
+def test_scene_runs_skips_hidden_and_overwrite_folders(tmp_path):
+    """The run folders of a scene are its visible subfolders: a hidden one (an earlier run
+    that ``--overwrite`` could not delete) and ``<run>.overwrite`` (a replacement that failed
+    or was stopped) were evaluated as extra controllers."""
+    from agents.evaluate import scene_runs
+    base = tmp_path / "runs" / "default"
+    for name in ("ppo_seed0", "sac_seed0", ".ppo_seed0.replaced-123", "ppo_seed0.overwrite"):
+        (base / name).mkdir(parents=True)
+    (base / "notes.txt").write_text("not a run")
+    got = [p.name for p in scene_runs("default", tmp_path / "runs")]
+    assert got == ["ppo_seed0", "sac_seed0"], got

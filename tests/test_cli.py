@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -302,6 +303,12 @@ def test_unwritable_out_fails_before_any_work(tmp_path, capsys, monkeypatch, arg
     assert main(argv + ["--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert f"--out: cannot write {str(out)!r}: {str(blocker)!r} is a file" in err, err
+    # the probe creates no folder (a missing one is made by the writes, after the work)
+    from rolling_env.io import check_writable
+    fresh = tmp_path / "new" / "deeper"
+    assert check_writable(fresh / "x.md") == fresh / "x.md"
+    assert check_writable(fresh, folder=True) == fresh
+    assert not (tmp_path / "new").exists(), "the probe made a folder"
 
 
 @pytest.mark.parametrize("command,module,default", [

@@ -227,7 +227,8 @@ def test_energy_residual_does_not_depend_on_the_runner_starting_velocity(vstar0_
 
 def test_kinetic_start_survives_get_and_set_state():
     """The ledger's starting kinetic energy is part of the state (get_state / set_state), and
-    a reset at rest clears it; a vstar0 whose kinetic energy overflows is refused by name."""
+    a reset at rest clears it; a vstar0 whose kinetic energy overflows is refused by name,
+    leaving the state as it was."""
     m = 1e-3
     drv = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=0.3, m=m))
     drv.reset(vstar0=2.0)
@@ -236,8 +237,11 @@ def test_kinetic_start_survives_get_and_set_state():
     assert drv.energy["kinetic_start"] == 0.0, drv.energy
     drv.set_state(state)
     assert drv.energy["kinetic_start"] == pytest.approx(0.5 * m * 4.0, rel=1e-12)
+    before = drv.get_state()
     with pytest.raises(ValueError, match="vstar0 = .*kinetic energy beyond the float range"):
         drv.reset(vstar0=1e300)
+    after = drv.get_state()
+    assert all(np.array_equal(x, y) for x, y in zip(before, after)), "a refused reset changed it"
 
 
 def test_energy_ledger_is_scale_free_in_mu():
