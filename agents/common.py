@@ -207,35 +207,18 @@ def _in_range(key, x):
     return x
 
 
-def yaml_number(v):
-    """``v``, or the number a string spells: PyYAML (YAML 1.1) reads ``3e-4``, ``9e-1`` and
-    ``1e3`` as strings (its floats need a dot and a signed exponent), while scene files
-    accept that notation (``rolling_env.scenes``, which reads such strings with ``float``):
-    the hyper-parameters read it the same way.  Anything else is returned unchanged (and
-    refused by the caller, naming the key)."""
-    if isinstance(v, str):
-        try:
-            return float(v)
-        except ValueError:
-            pass
-    return v
-
-
 def _int(key, v):
-    """An integer (a float with an integer value too, for YAML's ``!!float 1e6`` and ``1e3``),
-    never truncated."""
-    x = yaml_number(v)
-    if isinstance(x, bool) or not isinstance(x, (int, float)) or (
-            isinstance(x, float) and not (x == x and abs(x) != _INF and x == int(x))):
+    """An integer (a float with an integer value too, for ``1e6``), never truncated."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or (
+            isinstance(v, float) and not (v == v and abs(v) != _INF and v == int(v))):
         raise ValueError(f"hyper-parameter {key!r} must be an integer, got {v!r}")
-    return _in_range(key, int(x))
+    return _in_range(key, int(v))
 
 
 def _number(key, v):
-    x = yaml_number(v)
-    if isinstance(x, bool) or not isinstance(x, (int, float)):
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ValueError(f"hyper-parameter {key!r} must be a number, got {v!r}")
-    return _in_range(key, float(x))
+    return _in_range(key, float(v))
 
 
 def check_value(key: str, v, kinds: set):
@@ -245,10 +228,6 @@ def check_value(key: str, v, kinds: set):
         return None
     if "any" in kinds:
         return v
-    if isinstance(v, str) and kinds & {"float", "int"} and isinstance(yaml_number(v), float):
-        # 3e-4 (a string to PyYAML): the number, also where a string form exists (lin_<x>,
-        # auto): float() reads neither of those
-        return _number(key, v) if "float" in kinds else _int(key, v)
     if "class" in kinds and not kinds - {"class", "none"}:
         raise ValueError(f"hyper-parameter {key!r} takes a Python class: not supported in the "
                          "YAML")
@@ -311,8 +290,8 @@ def check_hyperparams(algo: str, hp: dict) -> dict:
     """Validate an entry of the hyper-parameter YAML for ``algo``: every key is either an RL
     Zoo key the script handles (``ZOO_KEYS``) or a keyword of the algorithm's ``__init__``
     (found with ``inspect.signature``), with a value of the type SB3 annotates and in
-    ``RANGES``; anything else raises a ValueError naming the key.  Numbers may be written in
-    exponent form (``3e-4``, ``1e3``: ``yaml_number``; an integer only with an integer value),
+    ``RANGES``; anything else raises a ValueError naming the key (an integer may be a float
+    with an integer value: ``1e3``, which ``rolling_env.scenes.read_yaml`` reads as a float),
     and the values inside ``policy_kwargs`` are checked too (``check_policy_kwargs``).  Returns
     ``{"n_envs", "n_timesteps", "policy", "normalize" (dict or None), "env_kwargs",
     "action_noise" (None or a (type, std) pair), "kwargs" (for the algorithm)}``;
@@ -347,8 +326,6 @@ def check_hyperparams(algo: str, hp: dict) -> dict:
             raise ValueError(f"hyper-parameter 'normalize': unknown key(s) {bad} (VecNormalize "
                              f"takes {sorted(allowed)}; gamma is the algorithm's)")
         for k, x in list(norm.items()):
-            if k in ("clip_obs", "clip_reward", "epsilon", "gamma"):
-                x = norm[k] = yaml_number(x)  # 1e1: a string to PyYAML
             if k in ("norm_obs", "norm_reward") and not isinstance(x, bool):
                 raise ValueError(f"hyper-parameter 'normalize': {k} must be true or false, "
                                  f"got {x!r}")
@@ -464,11 +441,11 @@ def check_policy_kwargs(algo: str, pk: dict) -> dict:
                                  f"{', '.join('nn.' + n for n in sorted(allowed))}), got "
                                  f"{getattr(v, '__name__', v)!r}")
         elif k == "log_std_init":
-            out[k] = check_range(name, yaml_number(v), LOG_STD_MIN, LOG_STD_MAX)
+            out[k] = check_range(name, v, LOG_STD_MIN, LOG_STD_MAX)
         elif k == "clip_mean":
-            out[k] = check_range(name, yaml_number(v), 0.0, 100.0, lo_open=True)
+            out[k] = check_range(name, v, 0.0, 100.0, lo_open=True)
         elif k == "n_critics":
-            out[k] = check_int(name, yaml_number(v), 1, N_CRITICS_MAX)
+            out[k] = check_int(name, v, 1, N_CRITICS_MAX)
         elif k in ("ortho_init", "full_std", "use_expln", "squash_output",
                    "share_features_extractor", "normalize_images"):
             if not isinstance(v, bool):

@@ -132,6 +132,14 @@ def _env_bad(e, st, extra):
     return 1 if (flag != 0 or not ok) else 0
 
 
+@njit(**K.JIT)
+def mark_failed(st, extra, failed):
+    """``failed[e]`` = 1 for each env ``_env_bad`` counts, else 0 (for the step error's
+    message; not on the hot path)."""
+    for e in range(st.shape[0]):
+        failed[e] = _env_bad(e, st, extra)
+
+
 @njit(inline="always", **K.JIT)
 def _env_outputs(e, steps, extra, limit, rew, trunc):
     """Env e's reward and truncation flag (its step count reached ``limit``) into the

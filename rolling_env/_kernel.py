@@ -662,6 +662,15 @@ def _stuck_length(W, i0, i1, j0, j1, x_lo, dx, c1, a):
 _FM_INNER = {"reassoc", "nsz"}
 
 
+@njit(inline="always", **JIT)
+def _inner_limit(x_lo, dx, i, c, muEG, d, inv3R):
+    """Friction limit of inner cell i (overlap dx) with the patch centre at c: muEG times the
+    integral of uN over the cell, clamped at 0 (a NaN stays NaN for the flag checks)."""
+    zl = (x_lo + i * dx) - c
+    Li = muEG * dx * (d - (zl * zl + zl * (zl + dx) + (zl + dx) * (zl + dx)) * inv3R)
+    return 0.0 if Li < 0.0 else Li
+
+
 @njit(fastmath=_FM_INNER, **JIT)
 def _build_inner(W, j0, j1, x_lo, dx, c1, muEG, d, inv3R, dxdt, sv0, mu, mass):
     """Build pass over the inner cells j0..j1 (A = U; friction limits; runner equation at
@@ -674,10 +683,7 @@ def _build_inner(W, j0, j1, x_lo, dx, c1, muEG, d, inv3R, dxdt, sv0, mu, mass):
         W[W_A, i] = Ai  # B = dx dt is written only for _solve_bracketed, which reads it
         SU += Ai
         if mu is not None:
-            zl = (x_lo + i * dx) - c1
-            Li = muEG * dx * (d - (zl * zl + zl * (zl + dx) + (zl + dx) * (zl + dx)) * inv3R)
-            if Li < 0.0:
-                Li = 0.0
+            Li = _inner_limit(x_lo, dx, i, c1, muEG, d, inv3R)
             W[W_L + L_LIMIT, i] = Li
             if mass is not None:
                 Ut, dU = _clip_slope(Ai + dxdt * sv0, Li, dxdt)
@@ -794,17 +800,9 @@ def _clip_path(a, b, L0, L1):
 
 
 @njit(inline="always", **JIT)
-def _start_limit(x_lo, dx, i, c0, muEG, d, inv3R):
-    """Friction limit of inner cell i with the patch centre at c0 (as ``_build_inner`` at c1)."""
-    zl = (x_lo + i * dx) - c0
-    L0 = muEG * dx * (d - (zl * zl + zl * (zl + dx) + (zl + dx) * (zl + dx)) * inv3R)
-    return L0 if L0 > 0.0 else 0.0
-
-
-@njit(inline="always", **JIT)
 def _limit_drift(x_lo, dx, c0, c1, muEG, inv3R):
     """(alpha, beta) with L1 - L0 = alpha + beta i for the friction limit of inner cell i at
-    patch centres c1 (end) and c0 (start) (``_start_limit``: muEG dx (d - S(z) / (3R)),
+    patch centres c1 (end) and c0 (start) (``_inner_limit``: muEG dx (d - S(z) / (3R)),
     S(z) = z^2 + z (z + dx) + (z + dx)^2, z = x_lo + i dx - c; S(z + h) - S(z) =
     3 h (2 z + h + dx) with h = c1 - c0), for a filter: equal to the quadratics up to
     rounding (and the clamp at 0, which inner cells do not reach)."""
@@ -841,7 +839,7 @@ def _impulse_fix(W, j0, j1, x_lo, dx, c0, muEG, d, inv3R, dxdt, s):
         a = W[W_A, i]
         b = a + dxdt * s
         L1 = W[W_L + L_LIMIT, i]
-        L0 = _start_limit(x_lo, dx, i, c0, muEG, d, inv3R)
+        L0 = _inner_limit(x_lo, dx, i, c0, muEG, d, inv3R)
         if _path_kinks(a, b, L0, L1):
             fix += _clip_path(a, b, L0, L1) - 0.5 * (a + math.copysign(L1, b))
     return fix

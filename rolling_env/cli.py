@@ -13,7 +13,7 @@ import math
 import re
 import sys
 
-from .io import interrupt_ends_process
+from .io import check_writable, interrupt_ends_process
 
 COMMAND_MODULES = ["physics", "figures", "converge", "stability", "bench", "rollout"]
 
@@ -75,6 +75,14 @@ def folder_path(name):
         return text
     conv.__name__ = name
     return conv
+
+
+def report_out(args, default: str):
+    """Where a command with ``--quick`` writes its report: ``--out`` where given, else
+    ``default``, but nowhere for ``--quick`` without ``--out`` (a quick subset never replaces
+    the full report); probed (``io.check_writable``) before the command computes anything."""
+    out = args.out if (args.out is not None or args.quick) else default
+    return None if out is None else check_writable(out)
 
 
 def emit(result: dict, as_json: bool, human: str) -> None:

@@ -340,11 +340,11 @@ def raise_step_error(bad: int, action, shape, st, scene: Scene | None = None,
 
 
 def _failed_envs(st, extra) -> str:
-    """Which envs of a batch ``_envkernel._env_bad`` counted, for the error message: every
-    env was stepped, these are left in an invalid state (reset them)."""
-    flag = st[:, K.ST_FLAG].astype(np.int64) & (K.FLAG_GRID | K.FLAG_NONFINITE)
-    ok = np.isfinite(extra[:, EK.X_REWARD]) & np.isfinite(extra[:, EK.X_VS])
-    bad = np.flatnonzero((flag != 0) | ~ok).tolist()
+    """Which envs of a batch the kernel counted as failed (``_envkernel.mark_failed``), for
+    the error message: every env was stepped, these are left in an invalid state."""
+    failed = np.zeros(st.shape[0], dtype=np.int64)
+    EK.mark_failed(st, extra, failed)
+    bad = np.flatnonzero(failed).tolist()
     shown = ", ".join(map(str, bad[:10])) + (", ..." if len(bad) > 10 else "")
     return (f" (in {len(bad)} of the batch's {st.shape[0]} envs: {shown}; the others stepped "
             "normally; reset the failed ones, in gym.make_vec with "

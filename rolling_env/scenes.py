@@ -11,6 +11,7 @@ import dataclasses
 import math
 import numbers
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -214,7 +215,9 @@ def load_scene(scene: str | os.PathLike | dict | Scene = "default", **overrides)
 
 class _UniqueKeyLoader(yaml.SafeLoader):
     """YAML's safe loader, except that a key given twice in one mapping is an error (plain
-    YAML keeps the last value silently, hiding an edit that did not take)."""
+    YAML keeps the last value silently, hiding an edit that did not take), and that numbers
+    in exponent form without a dot or a signed exponent (``3e-4`` has one, ``1e3`` neither)
+    are floats, as in YAML 1.2 (PyYAML's YAML 1.1 reads ``1e3`` and ``5e-7`` as strings)."""
 
     def construct_mapping(self, node, deep=False):
         if isinstance(node, yaml.MappingNode):
@@ -232,6 +235,12 @@ class _UniqueKeyLoader(yaml.SafeLoader):
                         None, None, f"duplicate key {key!r}", key_node.start_mark)
                 seen.add(key)
         return super().construct_mapping(node, deep=deep)
+
+
+_UniqueKeyLoader.add_implicit_resolver(  # copied per class by PyYAML: SafeLoader is unchanged
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."))
 
 
 def read_yaml(path, what: str = "scene file"):

@@ -1,7 +1,7 @@
 """Subcommand bench: speed and memory benchmarks -> results/benchmarks.md."""
 from __future__ import annotations
 
-from ..cli import emit, file_path
+from ..cli import emit, file_path, report_out
 
 DEFAULT_OUT = "results/benchmarks.md"
 
@@ -22,11 +22,8 @@ def register(sub):
 
 def _run(args):
     from ..bench import report, run
-    from ..io import check_writable, write_text
-    # the quick run is written only where --out says so: never over the full report
-    out = args.out if (args.out is not None or args.quick) else DEFAULT_OUT
-    if out is not None:
-        check_writable(out)
+    from ..io import write_text
+    out = report_out(args, DEFAULT_OUT)
     res = run(quick=args.quick)
     text = report(res)
     if out is not None:

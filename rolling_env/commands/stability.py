@@ -1,7 +1,7 @@
 """Subcommand stability: extreme and stiff cases -> results/stability.md."""
 from __future__ import annotations
 
-from ..cli import emit, file_path
+from ..cli import emit, file_path, report_out
 
 DEFAULT_OUT = "results/stability.md"
 
@@ -25,12 +25,8 @@ def register(sub):
 
 
 def _run(args):
-    from ..io import check_writable
     from ..stability import report, run, write
-    # the quick subset is written only where --out says so: never over the full report
-    out = args.out if (args.out is not None or args.quick) else DEFAULT_OUT
-    if out is not None:
-        check_writable(out)
+    out = report_out(args, DEFAULT_OUT)
     rows = run(quick=args.quick)
     text = report(rows) if out is None else write(rows, out)
     emit({"rows": rows}, args.json, text)
