@@ -6,11 +6,14 @@
 
 Controllers: the two Eq. 32 baselines and every trained agent under ``<runs>/<scene key>/*/``
 (``common.scene_key``; each run checked to be trained on the scene's content, ``check_run_scene``)
-(``agent_files``: EvalCallback's best model when its VecNormalize statistics were saved with
-it, else the final model, else the checkpoint, with the statistics saved beside it; a model
-whose statistics were saved at another step is skipped with a warning for the next one).  Writes ``results/comparison.md`` and ``results/comparison.csv``
-(atomically) and plots under ``results/plots/``: learning curves per scene and one trajectory
-per controller on the same target.  Without ``--baselines-only`` a missing ``--runs`` folder,
+(``agent_files``: the final model, or with ``--model best`` EvalCallback's best model when its
+VecNormalize statistics were saved with it; an interrupted run's checkpoint where there is
+neither; the statistics saved beside the model; a model whose statistics were saved at
+another step is skipped with a warning for the next one; each row names the file used).
+Writes ``results/comparison.md`` and ``results/comparison.csv`` (atomically) and plots under
+``results/plots/``: learning curves per scene and one trajectory per controller on the same
+target.  Runs of one configuration with several seeds (``<name>_seed<N>``) are also summed
+up over the seeds (``seed_summary``).  Without ``--baselines-only`` a missing ``--runs`` folder,
 or a scene without a trained agent there, is a usage error before anything is written (a
 mistyped ``--runs`` replaced the committed table with a baselines-only one); so are a scene
 given twice in ``--scenes`` (by scene key), a run folder named like a baseline, and a damaged
@@ -23,6 +26,7 @@ import argparse
 import csv
 import io
 import json
+import re
 import sys
 import tempfile
 from pathlib import Path
@@ -155,21 +159,29 @@ def load_agent(path, env=None) -> NormalizedAgent:
     return NormalizedAgent(model, vecnorm)
 
 
-def agent_files(run: Path) -> list[Path]:
-    """The models of a run in the order they are tried: EvalCallback's best model (selected
-    on the training script's own eval env, never on the held-out targets here) when its
-    VecNormalize statistics were saved with it, the final model, an interrupted run's
-    checkpoint."""
+#: which model of a run ``--model`` evaluates: the final one (``model.zip``, RL Zoo's default)
+#: or EvalCallback's best (``best_model.zip``, selected on the training script's own eval env,
+#: never on the held-out targets here)
+MODELS = ("final", "best")
+
+
+def agent_files(run: Path, model: str = "final") -> list[Path]:
+    """The models of a run in the order they are tried.  ``model`` "final": the final model,
+    then an interrupted run's checkpoint; "best": EvalCallback's best model when its
+    VecNormalize statistics were saved with it, then those two.  The file used is recorded in
+    each row (``model_file``), so a fallback is never reported as the kind asked for."""
+    if model not in MODELS:
+        raise ValueError(f"model must be one of {MODELS}, got {model!r}")
     files = []
     best = run / "best_model.zip"
-    if best.exists() and (run / "best_model_vecnormalize.pkl").exists():
+    if model == "best" and best.exists() and (run / "best_model_vecnormalize.pkl").exists():
         files.append(best)
     return files + [run / n for n in ("model.zip", "checkpoint.zip") if (run / n).exists()]
 
 
-def agent_file(run: Path) -> Path | None:
+def agent_file(run: Path, model: str = "final") -> Path | None:
     """The first of ``agent_files`` (None for a run without a model)."""
-    files = agent_files(run)
+    files = agent_files(run, model)
     return files[0] if files else None
 
 
@@ -252,15 +264,16 @@ def scene_runs(scene: str, runs: Path | None) -> list[Path]:
                   and not p.name.endswith(".overwrite"))
 
 
-def controllers_for(scene: str, runs: Path | None, env) -> dict:
-    """The two baselines and every run's agent (each run checked to be trained on ``scene``,
+def controllers_for(scene: str, runs: Path | None, env, model: str = "final") -> dict:
+    """The two baselines and every run's agent (``model``: which of its models, see
+    ``agent_files``; each run checked to be trained on ``scene``,
     its meta.json and evaluations.npz read); ``runs`` None: the baselines alone.  A run
     folder named like a baseline is refused (it would replace the baseline's row); a damaged
     file of a run is a ValueError naming it, before any episode runs."""
     ctrls = {"eq32-open-loop": Eq32OpenLoop.from_env(env),
              "eq32-feedback": Eq32Feedback.from_env(env)}
     for run in scene_runs(scene, runs):
-        files = agent_files(run)
+        files = agent_files(run, model)
         if files:
             if run.name in BASELINES:
                 raise ValueError(f"run folder {str(run)!r} has the name of a baseline: rename "
@@ -268,15 +281,15 @@ def controllers_for(scene: str, runs: Path | None, env) -> dict:
             check_run_scene(run, scene)
             _budget(run)
         learning_curve(run)  # plotted for every run folder of the scene
-        for k, model in enumerate(files):
+        for k, path in enumerate(files):
             try:
-                agent = load_agent(model, env)
+                agent = load_agent(path, env)
             except MismatchedStatistics as e:  # a pair that does not belong together
                 if k == len(files) - 1:
                     raise
                 print(f"warning: {run}: {e}; trying {files[k + 1].name}", file=sys.stderr)
                 continue
-            agent.file, agent.run = model.name, run
+            agent.file, agent.run = path.name, run
             ctrls[run.name] = agent
             break
     return ctrls
@@ -286,12 +299,12 @@ MACHINE = "2-core x86_64 CPU, no GPU"
 
 
 def evaluate_scene(scene: str, runs: Path, episodes: int, env=None,
-                   ctrls: dict | None = None) -> tuple[list[dict], dict]:
+                   ctrls: dict | None = None, model: str = "final") -> tuple[list[dict], dict]:
     """Every controller on the scene's held-out targets (episode i: target i, seed
     EVAL_SEED + i).  Returns one row per controller and the trajectory of target 0 of each.
     ``env`` and ``ctrls`` (from ``controllers_for``) are built here when not given."""
     env = env if env is not None else rolling_env.make(scene)
-    ctrls = ctrls if ctrls is not None else controllers_for(scene, runs, env)
+    ctrls = ctrls if ctrls is not None else controllers_for(scene, runs, env, model)
     tol = env.unwrapped.scene.tolerance
     targets = held_out_targets(scene, episodes)
     rows, trajectories = [], {}
@@ -389,6 +402,40 @@ def goal_verdicts(rows: list[dict]) -> list[dict]:
     return out
 
 
+_SEED_SUFFIX = re.compile(r"^(?P<name>.+)_seed(?P<seed>\d+)$")
+
+
+def seed_summary(rows: list[dict]) -> list[dict]:
+    """Per scene, the agents that differ only in their seed (run folders ``<name>_seed<N>``,
+    agents.train's default) summed up over the seeds, for each name with two runs or more:
+    the mean over seeds of each run's mean final |error| and slip work, the smallest and
+    largest run mean, and in how many seeds the goal (``goal_verdicts``) is met.  One seed
+    says little about an RL algorithm; this is the row to read where there are several."""
+    verdicts = {(v["scene"], v["agent"]): v for v in goal_verdicts(rows)}
+    groups: dict = {}
+    for r in rows:
+        m = _SEED_SUFFIX.match(r["controller"])
+        if r["controller"] in BASELINES or m is None:
+            continue
+        groups.setdefault((r["scene"], m["name"]), []).append(r)
+    out = []
+    for (scene, name), rs in groups.items():
+        if len(rs) < 2:
+            continue
+        err = np.array([r["final_abs_error_mean"] / r["tolerance"] for r in rs])
+        slip = np.array([r["slip_work_mean"] for r in rs])
+        met = [verdicts[(scene, r["controller"])]["met"] for r in rs
+               if (scene, r["controller"]) in verdicts]
+        out.append({"scene": scene, "agent": name, "seeds": len(rs),
+                    "seed_list": sorted(int(_SEED_SUFFIX.match(r["controller"])["seed"])
+                                        for r in rs),
+                    "error_mean": float(err.mean()), "error_min": float(err.min()),
+                    "error_max": float(err.max()), "slip_mean": float(slip.mean()),
+                    "slip_min": float(slip.min()), "slip_max": float(slip.max()),
+                    "met": sum(met), "judged": len(met)})
+    return out
+
+
 def _fmt_ratio(r: float) -> str:
     return "both 0" if np.isnan(r) else ("inf" if np.isinf(r) else f"{r:.2f}")
 
@@ -397,7 +444,8 @@ def _fmt_settle(st: float) -> str:
     return "never" if not np.isfinite(st) else f"{st * 1e3:.2f}"
 
 
-def write_tables(rows: list[dict], out: Path, episodes: int | None = None) -> None:
+def write_tables(rows: list[dict], out: Path, episodes: int | None = None,
+                 model: str = "final") -> None:
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=COLS, extrasaction="ignore")
     w.writeheader()
@@ -418,16 +466,21 @@ def write_tables(rows: list[dict], out: Path, episodes: int | None = None) -> No
              "|error| stays within the tolerance (over the episodes that reach it; 'never' if "
              "none does); slip work = friction work of the episode (wear), mean over episodes, "
              "in nJ (0 with mu = inf).  Training budget: env steps and wall time of the run on "
-             f"the {MACHINE} (shared with concurrent jobs); baselines need none.", "",
-             "| scene | controller | final abs error / tol (mean ± std) | RMS error / tol | "
-             "reached | settle [ms] | slip work [nJ] (mean ± std) | training (env steps, wall s) |",
-             "|---|---|---|---|---|---|---|---|"]
+             f"the {MACHINE} (shared with concurrent jobs); baselines need none.  Agents: "
+             + ("the final model of each run (`--model final`)" if model == "final" else
+                "EvalCallback's best model of each run (`--model best`)")
+             + "; *model* names the file evaluated.", "",
+             "| scene | controller | model | final abs error / tol (mean ± std) | RMS error / "
+             "tol | reached | settle [ms] | slip work [nJ] (mean ± std) | training (env steps, "
+             "wall s) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         tol = r["tolerance"]
         budget = (f"{r['train_env_steps']:,}, {r['train_wall_seconds']:.0f}"
                   if r["train_env_steps"] else "-")
         lines.append(
-            f"| {r['scene']} | {r['controller']} | {r['final_abs_error_mean'] / tol:.2f} ± "
+            f"| {r['scene']} | {r['controller']} | {r.get('model_file', '-')} | "
+            f"{r['final_abs_error_mean'] / tol:.2f} ± "
             f"{r['final_abs_error_std'] / tol:.2f} | {r['rms_error_mean'] / tol:.1f} | "
             f"{100 * r['reached_fraction']:.0f}% | {_fmt_settle(r['settle_time_mean'])} | "
             f"{r['slip_work_mean'] * 1e9:.3g} ± {r['slip_work_std'] * 1e9:.2g} | {budget} |")
@@ -444,6 +497,21 @@ def write_tables(rows: list[dict], out: Path, episodes: int | None = None) -> No
             lines.append(f"| {v['scene']} | {v['agent']} | {v['baseline']} | "
                          f"{v['error_ratio']:.2f} | {_fmt_ratio(sr)}"
                          f" | {'yes' if v['met'] else 'no'} |")
+    summary = seed_summary(rows)
+    if summary:
+        lines += ["", "## Over seeds", "",
+                  "Agents trained with the same configuration and different seeds "
+                  "(`<name>_seed<N>`): the mean over the seeds of each run's mean, with the "
+                  "smallest and largest run mean, and in how many seeds the goal above is met.",
+                  "", "| scene | agent | seeds | final abs error / tol: mean over seeds (min-max) "
+                  "| slip work [nJ]: mean over seeds (min-max) | goal met |",
+                  "|---|---|---|---|---|---|"]
+        for g in summary:
+            seeds = ", ".join(str(k) for k in g["seed_list"])
+            lines.append(f"| {g['scene']} | {g['agent']} | {seeds} | {g['error_mean']:.2f} "
+                         f"({g['error_min']:.2f}-{g['error_max']:.2f}) | "
+                         f"{g['slip_mean'] * 1e9:.3g} ({g['slip_min'] * 1e9:.3g}-"
+                         f"{g['slip_max'] * 1e9:.3g}) | {g['met']} of {g['judged']} |")
     atomic_write(out / "comparison.md", lambda p: Path(p).write_text("\n".join(lines) + "\n"))
 
 
@@ -501,6 +569,10 @@ def main(argv=None):
     p.add_argument("--out", default="results",
                    help="output folder of comparison.md, .csv and plots/ (default results, "
                         "relative to the current directory)")
+    p.add_argument("--model", choices=MODELS, default="final",
+                   help="which model of each run: final (model.zip, default) or best "
+                   "(EvalCallback's best_model.zip, selected on the training run's own eval "
+                   "env); the table names the file each row used")
     p.add_argument("--baselines-only", action="store_true",
                    help="compare the two Eq. 32 baselines alone (no --runs needed); without it "
                         "every scene must have a trained agent under <runs>/<scene key>/")
@@ -532,7 +604,7 @@ def main(argv=None):
     for scene in args.scenes:  # every agent loaded and checked before any episode runs
         env = rolling_env.make(scene)
         try:
-            setups.append((scene, env, controllers_for(scene, runs, env)))
+            setups.append((scene, env, controllers_for(scene, runs, env, args.model)))
         except (ValueError, OSError, KeyError) as e:
             p.error(f"--runs: {e}")
         if runs is not None and set(setups[-1][2]) <= set(BASELINES):  # no agent
@@ -551,7 +623,7 @@ def main(argv=None):
     with staged():  # written only once every scene has been evaluated, and all or none
         for scene, traj in plots:
             plot_scene(scene, runs, traj, out)
-        write_tables(rows, out, args.episodes)
+        write_tables(rows, out, args.episodes, args.model)
     return 0
 
 

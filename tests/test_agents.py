@@ -186,7 +186,8 @@ def test_short_training_run_saves_loadable_model(tmp_path):
     data = rollout(env, agent, seed=0, target=2e-7)
     m = episode_metrics(data, env.unwrapped.scene.tolerance)
     assert np.isfinite(m["final_abs_error"]) and len(data["step"]) == 512
-    assert agent_file(run) == run / "best_model.zip"  # its statistics were saved with it
+    assert agent_file(run) == run / "model.zip", "the final model is evaluated by default"
+    assert agent_file(run, "best") == run / "best_model.zip"  # its statistics saved with it
     assert not [p for p in run.iterdir() if p.name.startswith(".")], "scratch files left behind"
 
 
@@ -252,6 +253,26 @@ def test_goal_verdicts():
     v = {r["agent"]: r for r in goal_verdicts(rows)}
     assert v["ppo_seed0"]["baseline"] == "eq32-feedback" and v["ppo_seed0"]["met"]
     assert not v["sac_seed0"]["met"], "more slip work than the baseline is not the goal"
+
+
+def test_seed_summary_sums_up_runs_that_differ_only_in_their_seed():
+    """ppo_seed0..2 are one configuration over three seeds: the mean of the runs' means, their
+    range, and the goal met in 2 of 3 (seed 2 has more slip work than the baseline); sac_seed0
+    alone and a run not named <name>_seed<N> get no summary row."""
+    from agents.evaluate import seed_summary
+
+    def row(c, err, slip):
+        return dict(scene="s", controller=c, final_abs_error_mean=err * 1e-8,
+                    slip_work_mean=slip, tolerance=1e-8)
+    rows = [row("eq32-open-loop", 4.0, 1.0), row("eq32-feedback", 2.0, 3.0),
+            row("ppo_seed0", 0.5, 2.0), row("ppo_seed1", 0.9, 3.0), row("ppo_seed2", 1.0, 4.0),
+            row("sac_seed0", 0.1, 0.0), row("myrun", 0.1, 0.0)]
+    (g,) = seed_summary(rows)
+    assert (g["agent"], g["seeds"], g["seed_list"]) == ("ppo", 3, [0, 1, 2]), g
+    assert g["error_mean"] == pytest.approx(0.8, rel=1e-12), g
+    assert (g["error_min"], g["error_max"]) == pytest.approx((0.5, 1.0), rel=1e-12), g
+    assert g["slip_mean"] == pytest.approx(3.0, rel=1e-12), g
+    assert (g["met"], g["judged"]) == (2, 3), f"goal met in seeds 0 and 1 only: {g}"
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
@@ -474,6 +495,32 @@ def test_evaluate_finds_the_runs_of_a_scene_file(trained_run, tmp_path):
     assert "ppo_seed0" in text, f"the trained agent was not evaluated:\n{text}"
     assert (out / "plots" / "myscene.png").exists()
     assert sorted(p.name for p in scene.parent.iterdir()) == ["myscene.yaml"]
+
+
+def test_evaluate_model_choice_and_seed_summary(trained_run, tmp_path):
+    """--model final (the default) evaluates model.zip and --model best best_model.zip, and the
+    table names the file of each row; two seeds of one configuration get an "Over seeds"
+    row (here the same model twice: its range is one value)."""
+    import shutil
+
+    from agents.evaluate import main as evaluate_main
+    scene, runs = trained_run
+    mine = tmp_path / "runs"
+    shutil.copytree(runs, mine)
+    shutil.copytree(mine / "myscene" / "ppo_seed0", mine / "myscene" / "ppo_seed1")
+    for model, name in (("final", "model.zip"), ("best", "best_model.zip")):
+        out = tmp_path / model
+        argv = ["--scenes", str(scene), "--runs", str(mine), "--episodes", "2", "--out", str(out)]
+        assert evaluate_main(argv + ([] if model == "final" else ["--model", model])) == 0
+        with open(out / "comparison.csv") as f:
+            rows = {r["controller"]: r for r in csv.DictReader(f)}
+        assert rows["ppo_seed0"]["model_file"] == name, f"--model {model}: {rows['ppo_seed0']}"
+        md = (out / "comparison.md").read_text()
+        assert f"| myscene | ppo_seed1 | {name} |" in md, md
+        (line,) = [ln for ln in md.splitlines() if ln.startswith("| myscene | ppo | 0, 1 |")]
+        e0 = (float(rows["ppo_seed0"]["final_abs_error_mean"])
+              / float(rows["ppo_seed0"]["tolerance"]))
+        assert f"| {e0:.2f} ({e0:.2f}-{e0:.2f}) |" in line, f"mean and range of one value: {line}"
 
 
 @pytest.mark.parametrize("edit,match", [
@@ -1110,3 +1157,42 @@ def test_scene_runs_skips_hidden_and_overwrite_folders(tmp_path):
     (base / "notes.txt").write_text("not a run")
     got = [p.name for p in scene_runs("default", tmp_path / "runs")]
     assert got == ["ppo_seed0", "sac_seed0"], got
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_training_is_reproducible_from_the_seed(algo, tmp_path):
+    """Issue #4: everything reproducible from --seed.  Two runs with the same seed give
+    bit-identical policy parameters, VecNormalize statistics and evaluation log; another seed
+    gives other parameters (so the check can fail).  Both in this process (torch on one
+    thread, as agents.train sets it)."""
+    import torch
+
+    from agents.train import main as train_main
+    conf = tmp_path / f"{algo}.yml"
+    entry = {"n_envs": 2, "n_timesteps": 256, "normalize": "{'norm_obs': True}",
+             "policy_kwargs": "dict(net_arch=[16])"}
+    entry.update({"n_steps": 64, "batch_size": 32, "n_epochs": 2} if algo == "ppo" else
+                 {"buffer_size": 512, "learning_starts": 32, "batch_size": 16})
+    conf.write_text(yaml.safe_dump({"default": entry}))
+
+    def train(seed, name):
+        run = tmp_path / name
+        assert train_main(["--algo", algo, "--conf", str(conf), "--seed", str(seed),
+                           "--run-dir", str(run), "--eval-freq", "128", "--eval-episodes", "1",
+                           "--no-progress"]) == 0
+        agent = load_agent(run / "model.zip", rolling_env.make("default"))
+        params = {k: v.clone() for k, v in agent.model.policy.state_dict().items()}
+        with np.load(run / "evaluations.npz") as d:
+            evals = d["results"].copy()
+        return params, agent.vecnorm.obs_rms.mean.copy(), evals
+
+    p1, m1, e1 = train(5, "a")
+    p2, m2, e2 = train(5, "b")
+    p3, _, _ = train(6, "c")
+    assert p1.keys() == p2.keys()
+    for k in p1:
+        assert torch.equal(p1[k], p2[k]), f"{algo}: {k} differs between two runs with seed 5"
+    assert np.array_equal(m1, m2) and np.array_equal(e1, e2), \
+        f"{algo}: VecNormalize statistics or evaluation log differ between two runs with seed 5"
+    assert any(not torch.equal(p1[k], p3[k]) for k in p1), \
+        f"{algo}: seeds 5 and 6 gave the same parameters: the seed is not used"
