@@ -130,7 +130,9 @@ L_LIMIT = 0      # friction limit mu E*/G* integral of uN over the cell's part i
 L_E0, L_E1, L_E2 = 1, 2, 3  # released energy of an edge cell this sub-step: e0 + e1 s + e2 s^2
 L_QLIM = 4       # friction limit per unit overlap of an edge cell at the end of the sub-step:
                  # mu E*/G* times the mean uN over its part in contact (0: none in contact)
-N_LCOL = 5
+L_U0, L_IA, L_IB = 5, 6, 7  # with the ledger, of an edge cell: its content at the start of
+                 # the sub-step and its unclipped integral over it, IA + IB s (``_edge_mean``)
+N_LCOL = 8
 
 
 def work_rows(finite_mu: bool) -> int:
@@ -695,8 +697,8 @@ def _build_inner(W, j0, j1, x_lo, dx, c1, muEG, d, inv3R, dxdt, sv0, mu, mass):
 @njit(fastmath=_FM_INNER, **JIT)
 def _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass, edges, census):
     """Commit of the cells i0..i1, U = A + B s clipped to the friction limit.  Returns (T1,
-    Ta, slip, n_slid, n_kinks).  ``edges`` None: i0..i1 are inner cells (B = dx dt, overlap
-    dx).
+    Ta, slip, n_slid, n_kinks, n_held).  ``edges`` None: i0..i1 are inner cells (B = dx dt,
+    overlap dx).
     ``edges`` True: every cell of the contact, the inner cells j0..j1 as above and the edge
     cells with the B and limit per unit overlap the build pass stored for them, in one loop
     (a select per cell instead of a separate scalar loop over the few edge cells: 7% of the
@@ -704,7 +706,9 @@ def _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass, edges, census):
     they save).  ``census``: None (counts returned 0), or with the ledger and ``edges`` None
     the pair (alpha, beta) of ``_limit_drift``, for the ledger's impulse: the number of cells
     that slid and of those whose path bends in the sub-step (``_path_kinks``, which
-    ``_impulse_fix`` then integrates), counted in this loop rather than in a pass of their
+    ``_impulse_fix`` then integrates), and the signed count (+1 at +L, -1 at -L) of the
+    others that slid, which stayed at their limit all through (the curvature term of the
+    ledger's impulse), counted in this loop rather than in a pass of their
     own, with the start limit of cell i as its end limit less alpha + beta i (a pass of its
     own, or the start limit from its quadratic, made ``Drive.run`` with friction about 30%
     slower; this census, with the scalar passes it calls for, 20%: ``simulate`` at r = 0.3,
@@ -714,6 +718,7 @@ def _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass, edges, census):
     slip = 0.0
     n_slid = 0
     n_kinks = 0
+    n_held = 0.0
     j_lo = uint64(j0)  # i0 <= j0 <= i1 + 1
     n_in = uint64(max(j1 - j0 + 1, 0))
     for i in _cells(i0, i1 + 1):
@@ -724,6 +729,7 @@ def _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass, edges, census):
             Bi = dxdt if inner else Bm
         Ut = W[W_A, i] + Bi * s
         if mu is not None:
+            kink = False
             Li = W[W_L + L_LIMIT, i]
             q = Li * inv_dx
             if edges is not None:
@@ -731,16 +737,18 @@ def _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass, edges, census):
                 q = q if inner else qm
             if census is not None:
                 L0 = Li - (census[0] + census[1] * i)
-                n_kinks += 1 if _path_kinks(W[W_A, i], Ut, L0, Li) else 0
+                kink = _path_kinks(W[W_A, i], Ut, L0, Li)
+                n_kinks += 1 if kink else 0
             Ut, work, over = _slide(Ut, Li, q)
             slip += work
             if census is not None:
                 n_slid += 1 if over else 0
+                n_held += (1.0 if Ut > 0.0 else -1.0) if (over and not kink) else 0.0
             if mass is not None:
                 Ta += abs(Ut)
         W[W_U, i] = Ut
         T1 += Ut
-    return T1, Ta, slip, n_slid, n_kinks
+    return T1, Ta, slip, n_slid, n_kinks, n_held
 
 
 @njit(fastmath=_FM_INNER, **JIT)
@@ -845,6 +853,71 @@ def _impulse_fix(W, j0, j1, x_lo, dx, c0, muEG, d, inv3R, dxdt, s):
     return fix
 
 
+@njit(inline="always", **JIT)
+def _uN_antiderivative(z, a, d, inv3R):
+    """H(z) with H' = F(clamp(z, -a, a)), F(z) = d z - z^3 / (3R) the integral of uN = d -
+    z^2 / R from the patch centre to z: d z^2 / 2 - z^4 / (12 R) inside the contact, linear
+    outside (continuous)."""
+    zc = min(max(z, -a), a)
+    F = zc * (d - zc * zc * inv3R)
+    return zc * zc * (0.5 * d - 0.25 * zc * zc * inv3R) + F * (z - zc)
+
+
+@njit(inline="always", **JIT)
+def _limit_integral(xL, xR, c0, u, dt, a, d, inv3R, muEG):
+    """Time integral over a sub-step of the friction limit of the cell [xL, xR] (muEG times
+    the integral of uN over its part in contact, muEG (F(clamp(xR - c)) - F(clamp(xL - c))))
+    while the patch centre moves from c0 at speed u: exact, as differences of
+    ``_uN_antiderivative`` over 1/u.  Where the patch moves less than 1e-5 a in the
+    sub-step (the differences would cancel) the midpoint rule, within 1e-10 of it."""
+    h = u * dt
+    if abs(h) <= 1e-5 * a:
+        cm = c0 + 0.5 * h
+        zr = min(max(xR - cm, -a), a)
+        zl = min(max(xL - cm, -a), a)
+        return muEG * dt * (zr * (d - zr * zr * inv3R) - zl * (d - zl * zl * inv3R))
+    c1 = c0 + h
+    H = _uN_antiderivative
+    return muEG * ((H(xR - c0, a, d, inv3R) - H(xR - c1, a, d, inv3R))
+                   - (H(xL - c0, a, d, inv3R) - H(xL - c1, a, d, inv3R))) / u
+
+
+@njit(inline="always", **JIT)
+def _edge_mean(U0, Ut, Li, I_free, s, xL, xR, c0, u, dt, a, d, inv3R, muEG):
+    """Mean over a sub-step of an edge cell's content, for the ledger's impulse in sub-steps
+    where cells slid.  U0: content at the start; Ut: unclipped content at the end, Li the
+    limit there; I_free: the unclipped content's exact time integral (``_walk``'s IA + IB s);
+    IL: the limit's exact time integral (``_limit_integral``).
+    * At its limit at the start on the side the creep pushes it (or entering the contact in
+      the sub-step) and beyond it at the end, or leaving the contact: it slid all through,
+      +-IL / dt (exact).
+    * Inside its limits at both ends: I_free / dt (exact if it stays inside in between), at
+      most IL / dt in size (a cell that leaves the contact can go beyond its limit in between
+      and end with nothing).
+    * Inside at the start, beyond at the end on the same side: the free path up to the time
+      where the straight lines between the ends of |content| - limit cross, the limit's exact
+      integral from there.
+    * Otherwise (it stops sliding, or reverses): the mean of its clipped path taken straight
+      between the ends (``_clip_path``)."""
+    L0 = _edge_limit(xL, xR, c0, a, d, inv3R, muEG)[0]
+    IL = _limit_integral(xL, xR, c0, u, dt, a, d, inv3R, muEG)
+    sg = Ut if Ut != 0.0 else U0
+    held = abs(U0) >= L0 * (1.0 - 1e-9) and U0 * sg >= 0.0 and U0 * s >= 0.0
+    over = abs(Ut) > Li
+    if held and (over or (U0 != 0.0 and Li == 0.0)):
+        return math.copysign(IL, sg) / dt
+    if not over and not (held and U0 != 0.0):
+        return math.copysign(min(abs(I_free), IL), I_free) / dt
+    g0 = abs(U0) - L0
+    if over and g0 < 0.0 and U0 * Ut >= 0.0:
+        tau = -g0 / ((abs(Ut) - Li) - g0)  # in [0, 1): the end is beyond (g1 > 0)
+        cx = c0 + u * tau * dt
+        Lx = _edge_limit(xL, xR, cx, a, d, inv3R, muEG)[0]
+        rest = _limit_integral(xL, xR, cx, u, (1.0 - tau) * dt, a, d, inv3R, muEG)
+        return math.copysign(0.5 * tau * (abs(U0) + Lx) * dt + rest, Ut) / dt
+    return _clip_path(U0, Ut, L0, Li)
+
+
 @njit(**JIT)
 def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
     """Advance one control tick of n_sub sub-steps with piecewise-constant inputs.
@@ -914,7 +987,6 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
         c0 = c1
         c1 = c0 + u * dt
         v0 = v1
-        T0 = T1
         # cells touched: union of the contact at c0 and c1
         f0 = _cell_floor(min(c0, c1) - a, x_lo, inv_dx)  # as _contact_range at the end
         f1 = _cell_floor(max(c0, c1) + a, x_lo, inv_dx)
@@ -970,6 +1042,9 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                     L[L_E0, i] = e0
                     L[L_E1, i] = e1
                     L[L_E2, i] = e2
+                    L[L_U0, i] = U[i]
+                    L[L_IA, i] = IA
+                    L[L_IB, i] = IB
             else:
                 Ai = 0.0
                 Bi = 0.0
@@ -1034,20 +1109,26 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
             edge_cells = _edges(i0, i1, j0, j1)
             dimp = 0.0
             clipped = False
+            T1_in = 0.0  # with the ledger and friction: T of the inner cells at the end
+            m_edge = 0.0  # and the edge cells' contents, mean over the sub-step (_edge_mean)
             if ledger is None and mu is not None:
-                T1, Ta, slip, _ns, _nk = _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass,
-                                                 True, None)
+                T1, Ta, slip, _ns, _nk, _nh = _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu,
+                                                      mass, True, None)
                 edge_cells = _cells(0, 0)  # committed too: none left for the scalar loop
             elif ledger is not None and mu is not None:
-                T1, Ta, slip, n_slid, n_kinks = _commit(
+                T1, Ta, slip, n_slid, n_kinks, n_held = _commit(
                     W, j0, j1, j0, j1, dxdt, s, inv_dx, mu, mass, None,
                     _limit_drift(x_lo, dx, c0, c1, muEG, inv3R))
                 clipped = n_slid > 0
                 if n_kinks > 0:
                     dimp = _impulse_fix(W, j0, j1, x_lo, dx, c0, muEG, d, inv3R, dxdt, s)
+                # the inner cells that stayed at their limit follow it, a quadratic in time
+                # whose curvature (-2 muEG dx u^2 / R for the +limit) the trapezoid misses
+                dimp += n_held * (muEG * dx * inv3R * 0.5) * (u * dt) * (u * dt)
+                T1_in = T1
             else:
-                T1, Ta, slip, _ns, _nk = _commit(W, j0, j1, j0, j1, dxdt, s, inv_dx, mu, mass,
-                                                 None, None)
+                T1, Ta, slip, _ns, _nk, _nh = _commit(W, j0, j1, j0, j1, dxdt, s, inv_dx, mu,
+                                                      mass, None, None)
             for k in edge_cells:
                 i = _edge(k, j0, j1)
                 Ut = A[i] + B[i] * s
@@ -1076,6 +1157,9 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                                 Ln = muEG * _normal_content(xL, xL + dx, cn, a, d, inv3R)
                                 ei = min(ei, 0.5 * Ln * Ln / ln)
                         rel += ei
+                        xL = x_lo + i * dx
+                        m_edge += _edge_mean(L[L_U0, i], Ut, Li, L[L_IA, i] + L[L_IB, i] * s,
+                                             s, xL, xL + dx, c0, u, dt, a, d, inv3R, muEG)
                     Ut, work, over = _slide(Ut, Li, L[L_QLIM, i])
                     clipped |= over
                     slip += work
@@ -1102,12 +1186,14 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
         slip_acc += slip
         if ledger is not None:
             if clipped:
-                # some cells slid: trapezoid on the clipped force, exact for cells that slide
-                # all through the sub-step at a limit that changes linearly, plus for each inner
-                # cell that slid its clipped path's integral less its trapezoid (at a creep
-                # reversal its content flips from one limit to the other early in the sub-step,
-                # which the trapezoid alone misses: first order there)
-                imp = (0.5 * (T0 + T1) + dimp) * dt
+                # some cells slid (finite friction).  Inner cells: the trapezoid, exact for a
+                # cell that sticks (its content is linear in time) and, with the curvature
+                # term, for one at its limit all through; plus for each inner cell whose path
+                # bends its clipped path's integral less its trapezoid (at a creep reversal
+                # its content flips from one limit to the other early in the sub-step, which
+                # the trapezoid alone misses: first order there).  Edge cells: each its own
+                # mean (``_edge_mean``: exact for a cell that sticks or slides all through)
+                imp = (0.5 * (SU + T1_in) + dimp + m_edge) * dt
             else:
                 imp = SIA + SIB * s  # no slip: exact integral of T over the sub-step
             st[ST_IMP] += imp
