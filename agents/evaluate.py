@@ -329,9 +329,19 @@ def evaluate_scene(scene: str, runs: Path, episodes: int, env=None,
                                    else float("nan"))
         row["tolerance"] = tol
         row.update(_budget(getattr(ctrl, "run", None)))
+        row["config_key"] = _config_key(getattr(ctrl, "run", None))
         rows.append(row)
     env.close()
     return rows, trajectories
+
+
+def _config_key(run: Path | None) -> str | None:
+    """A run's config.yml less its seed, as one string (``seed_summary`` sums up over seeds
+    only the runs whose configurations are equal); None without one."""
+    cfg = run_config(run) if run is not None else None
+    if cfg is None:
+        return None
+    return json.dumps({k: v for k, v in cfg.items() if k != "seed"}, sort_keys=True, default=str)
 
 
 def _budget(run: Path | None) -> dict:
@@ -409,8 +419,11 @@ def seed_summary(rows: list[dict]) -> list[dict]:
     """Per scene, the agents that differ only in their seed (run folders ``<name>_seed<N>``,
     agents.train's default) summed up over the seeds, for each name with two runs or more:
     the mean over seeds of each run's mean final |error| and slip work, the smallest and
-    largest run mean, and in how many seeds the goal (``goal_verdicts``) is met.  One seed
-    says little about an RL algorithm; this is the row to read where there are several."""
+    largest run mean, and in how many seeds the goal (``goal_verdicts``) is met.  Runs of one
+    name whose configurations (config.yml less the seed), model files or training steps
+    differ (an interrupted run's checkpoint, another budget) are not summed up: a warning
+    says so.  One seed says little about an RL algorithm; this is the row to read where there
+    are several."""
     verdicts = {(v["scene"], v["agent"]): v for v in goal_verdicts(rows)}
     groups: dict = {}
     for r in rows:
@@ -421,6 +434,12 @@ def seed_summary(rows: list[dict]) -> list[dict]:
     out = []
     for (scene, name), rs in groups.items():
         if len(rs) < 2:
+            continue
+        kinds = {(r.get("config_key"), r.get("model_file"), r.get("train_env_steps")) for r in rs}
+        if len(kinds) > 1:
+            print(f"warning: {scene}: {', '.join(r['controller'] for r in rs)} are not summed "
+                  "up over seeds: their configurations (config.yml less the seed), model files "
+                  "or training steps differ", file=sys.stderr)
             continue
         err = np.array([r["final_abs_error_mean"] / r["tolerance"] for r in rs])
         slip = np.array([r["slip_work_mean"] for r in rs])
@@ -468,7 +487,8 @@ def write_tables(rows: list[dict], out: Path, episodes: int | None = None,
              "in nJ (0 with mu = inf).  Training budget: env steps and wall time of the run on "
              f"the {MACHINE} (shared with concurrent jobs); baselines need none.  Agents: "
              + ("the final model of each run (`--model final`)" if model == "final" else
-                "EvalCallback's best model of each run (`--model best`)")
+                "EvalCallback's best model of each run where it has one with its statistics, "
+                "else its final model (`--model best`)")
              + "; *model* names the file evaluated.", "",
              "| scene | controller | model | final abs error / tol (mean ± std) | RMS error / "
              "tol | reached | settle [ms] | slip work [nJ] (mean ± std) | training (env steps, "

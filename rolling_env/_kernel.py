@@ -130,14 +130,16 @@ L_LIMIT = 0      # friction limit mu E*/G* integral of uN over the cell's part i
 L_E0, L_E1, L_E2 = 1, 2, 3  # released energy of an edge cell this sub-step: e0 + e1 s + e2 s^2
 L_QLIM = 4       # friction limit per unit overlap of an edge cell at the end of the sub-step:
                  # mu E*/G* times the mean uN over its part in contact (0: none in contact)
-L_U0, L_IA, L_IB = 5, 6, 7  # with the ledger, of an edge cell: its content at the start of
-                 # the sub-step and its unclipped integral over it, IA + IB s (``_edge_mean``)
-N_LCOL = 8
+N_LCOL = 5       # rows of L in the env kernel; the ledger's kernel has three more:
+L_U0, L_IA, L_IB = 5, 6, 7  # of an edge cell, its content at the start of the sub-step and
+                 # its unclipped integral over it, IA + IB s (``_edge_mean``)
+N_LCOL_LEDGER = 8
 
 
-def work_rows(finite_mu: bool) -> int:
-    """Rows of the work array W: U, A, B and, with finite friction, the N_LCOL rows of L."""
-    return W_L + (N_LCOL if finite_mu else 0)
+def work_rows(finite_mu: bool, ledger: bool = True) -> int:
+    """Rows of the work array W: U, A, B and, with finite friction, the rows of L: N_LCOL
+    without the energy ledger (the env), N_LCOL_LEDGER with it."""
+    return W_L + ((N_LCOL_LEDGER if ledger else N_LCOL) if finite_mu else 0)
 
 # params vector
 P_R = 0
@@ -925,9 +927,10 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
     d: indentation, u: omega R (signed), v: sphere translation rate (signed),
     vs_presc: runner velocity when ``mass is None`` (prescribed runner), else ignored.
     mu / mass / load: float or None (infinite friction / prescribed runner / no load).
-    W: work array of shape (``work_rows(mu is not None)``, n): U, A, B and, with finite
-    friction, L = W[W_L:] (friction limit, the released-energy coefficients and the limit
-    per unit overlap of edge cells).
+    W: work array of shape (``work_rows(mu is not None, ledger is not None)``, n): U, A, B
+    and, with finite friction, L = W[W_L:] (friction limit, the released-energy coefficients
+    and the limit per unit overlap of edge cells; with the ledger also the rows L_U0, L_IA,
+    L_IB of ``_edge_mean``).
     ledger: True keeps the impulse and the energy ledger (``ST_IMP``, ``ST_REL``,
     ``ST_DRIVE``, ``ST_RUNNER``, ``ST_EXT``, ``ST_SNAP``, ``OUT_IMP``); None leaves them out
     (the env needs neither: its observation, reward and info use T, v*, x*, the slip work and
@@ -1110,7 +1113,6 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
             dimp = 0.0
             clipped = False
             T1_in = 0.0  # with the ledger and friction: T of the inner cells at the end
-            m_edge = 0.0  # and the edge cells' contents, mean over the sub-step (_edge_mean)
             if ledger is None and mu is not None:
                 T1, Ta, slip, _ns, _nk, _nh = _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu,
                                                       mass, True, None)
@@ -1157,9 +1159,6 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                                 Ln = muEG * _normal_content(xL, xL + dx, cn, a, d, inv3R)
                                 ei = min(ei, 0.5 * Ln * Ln / ln)
                         rel += ei
-                        xL = x_lo + i * dx
-                        m_edge += _edge_mean(L[L_U0, i], Ut, Li, L[L_IA, i] + L[L_IB, i] * s,
-                                             s, xL, xL + dx, c0, u, dt, a, d, inv3R, muEG)
                     Ut, work, over = _slide(Ut, Li, L[L_QLIM, i])
                     clipped |= over
                     slip += work
@@ -1185,7 +1184,15 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
         xsph += v * dt
         slip_acc += slip
         if ledger is not None:
-            if clipped:
+            if clipped and mu is not None:
+                m_edge = 0.0  # the edge cells' contents, mean over the sub-step
+                if a > 0.0:
+                    for k in _edges(i0, i1, j0, j1):
+                        i = _edge(k, j0, j1)
+                        xL = x_lo + i * dx
+                        m_edge += _edge_mean(L[L_U0, i], A[i] + B[i] * s, L[L_LIMIT, i],
+                                             L[L_IA, i] + L[L_IB, i] * s, s, xL, xL + dx, c0,
+                                             u, dt, a, d, inv3R, muEG)
                 # some cells slid (finite friction).  Inner cells: the trapezoid, exact for a
                 # cell that sticks (its content is linear in time) and, with the curvature
                 # term, for one at its limit all through; plus for each inner cell whose path
@@ -1235,7 +1242,11 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
 
 @njit(**JIT)
 def run_ticks(W, st, p, d, u, v, vs, mu, mass, load, n_sub, dt, out):
-    """Run len(d) ticks; out has shape (len(d), N_OUT).  Stops at the first error flag."""
+    """Run len(d) ticks with the energy ledger; out has shape (len(d), N_OUT).  Stops at the
+    first error flag.  W must have ``work_rows(mu is not None)`` rows (the ledger writes rows
+    an env's work array lacks: raises instead of writing past it)."""
+    if W.shape[0] < W_L + (N_LCOL_LEDGER if mu is not None else 0):
+        raise ValueError("run_ticks: the work array lacks the energy ledger's rows")
     for k in range(d.shape[0]):
         _tick(W, st, p, d[k], u[k], v[k], vs[k], mu, mass, load, n_sub, dt, out[k], True)
         if st[ST_FLAG] != 0.0 and (int(st[ST_FLAG]) & (FLAG_NONFINITE | FLAG_GRID)) != 0:

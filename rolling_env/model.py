@@ -191,7 +191,7 @@ class Drive(CellViews):
         # work rows L (limits, edge release coefficients); U, A, B and L are views of it
         self.cells = np.zeros((K.work_rows(finite_mu), n))
         self.st = np.zeros(K.N_STATE)
-        self.ledger = True  # run() keeps the impulse and energy ledger; the env kernel does not
+        self._ledger = True  # run() keeps the impulse and energy ledger; the env kernel does not
 
     def _check_scales(self):
         """The kernel works in units of a_ref, t_ref and G* a_ref^2: every scale and scaled
@@ -224,6 +224,24 @@ class Drive(CellViews):
     def kernel_features(self):
         """(mu, mass, load) as the kernel takes them: None where the feature is absent."""
         return self._mu, self._mass, self._load
+
+    @property
+    def ledger(self) -> bool:
+        """Whether this drive keeps the impulse and energy ledger (``Drive.run``, the default).
+        The env sets it False: its kernel leaves the ledger out, and the work array drops the
+        rows only the ledger reads (``_kernel.work_rows``; the contents are kept)."""
+        return self._ledger
+
+    @ledger.setter
+    def ledger(self, keep: bool) -> None:
+        keep = bool(keep)
+        rows = K.work_rows(self._mu is not None, keep)
+        if rows != self.cells.shape[0]:
+            cells = np.zeros((rows, self.cells.shape[1]))
+            m = min(rows, self.cells.shape[0])
+            cells[:m] = self.cells[:m]
+            self.cells = cells
+        self._ledger = keep
 
     # ------------------------------------------------------------------ state
     def reset(self, c0: float = 0.0, vstar0: float = 0.0) -> None:
@@ -293,8 +311,14 @@ class Drive(CellViews):
         history: a partly slipping contact that comes to rest unloads from its limits and
         reads 1.0.
         A massless runner (m = 0) under a load with no force equilibrium (|F_ext| above mu N,
-        or any load without contact) raises ValueError.
+        or any load without contact) raises ValueError.  A drive whose ``ledger`` is off (an
+        env's) raises RuntimeError: its ledger is not kept, and its work array lacks the
+        ledger's rows.
         """
+        if not self._ledger:
+            raise RuntimeError("this drive is stepped by the env kernel (ledger off): Drive.run "
+                               "keeps the energy ledger, which this drive has not kept; build "
+                               "a Drive of its own, or set drive.ledger = True and reset it")
         check_range("dt_tick", dt_tick, 0.0, _INF, lo_open=True, hi_open=True)
         n_sub = check_n_sub(n_sub)
         self._check_state_valid()

@@ -273,6 +273,11 @@ def test_seed_summary_sums_up_runs_that_differ_only_in_their_seed():
     assert (g["error_min"], g["error_max"]) == pytest.approx((0.5, 1.0), rel=1e-12), g
     assert g["slip_mean"] == pytest.approx(3.0, rel=1e-12), g
     assert (g["met"], g["judged"]) == (2, 3), f"goal met in seeds 0 and 1 only: {g}"
+    # an interrupted run (its checkpoint, fewer steps) or another configuration is not a seed
+    for key, value in (("model_file", "checkpoint.zip"), ("train_env_steps", 20_000),
+                       ("config_key", '{"n_timesteps": 1000}')):
+        other = [dict(r, **{key: value}) if r["controller"] == "ppo_seed1" else r for r in rows]
+        assert seed_summary(other) == [], f"runs with another {key} were summed up over seeds"
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])

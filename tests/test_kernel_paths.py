@@ -428,7 +428,9 @@ def test_env_path_matches_the_ledger_path(scene):
     mu, mass, load, _ = core.features
     outs = {}
     for ledger in (True, None):
-        W, st = (x[0].copy() for x in (core.cells, core.st))
+        W = np.zeros((K.work_rows(mu is not None, ledger is not None), core.cells.shape[2]))
+        W[:core.cells.shape[1]] = core.cells[0, :W.shape[0]]  # the env's rows lack the ledger's
+        st = core.st[0].copy()
         out = np.zeros((d.size, K.N_OUT))
         _run(W, st, core.p[0], d, u, v, mu, mass, load, n_sub, dt, out, ledger)
         assert st[K.ST_FLAG] == 0, f"{scene}: flags {st[K.ST_FLAG]} (contact left the row?)"
@@ -669,3 +671,30 @@ def test_env_reproduces_the_kernel_before_the_speed_ups(scene):
         else:
             err = np.abs(cur - old).max() / (np.abs(old).max() + 1e-300)
             assert err <= 1e-10, f"{scene}/{k}: differs by {err:.1e} of its largest value"
+
+
+def test_env_drive_drops_the_ledger_rows_and_refuses_drive_run():
+    """The env kernel keeps no energy ledger, so an env's work array has no ledger rows
+    (``work_rows(finite_mu, ledger=False)``; three rows per cell fewer with friction), in the
+    single env and the batched one; ``Drive.run``, which writes those rows, refuses such a
+    drive by name (it would index rows the array lacks) until the ledger is switched back on,
+    which restores the rows and keeps the contents."""
+    import rolling_env
+    from rolling_env.vector import BatchCore
+    env = rolling_env.make("default")
+    drv = env.unwrapped.drive
+    assert drv.cells.shape[0] == K.work_rows(True, False) == K.work_rows(True) - 3, drv.cells.shape
+    core = BatchCore(2, "default")
+    assert core.cells.shape[1] == K.work_rows(True, False), core.cells.shape
+    env.reset(seed=0)
+    env.step(np.array([1.0, 0.5, 0.5], dtype=np.float32))
+    U = drv.U.copy()
+    assert np.any(U != 0.0), "no contact after a step"
+    with pytest.raises(RuntimeError, match="ledger off"):
+        drv.run(dt_tick=1e-6, n_sub=4, omega_R=[0.1], v=[0.1], N=[0.5])
+    W, st, p = drv.cells.copy(), drv.st.copy(), drv._p
+    with pytest.raises(ValueError, match="lacks the energy ledger's rows"):  # not past the rows
+        K.run_ticks(W, st, p, np.array([0.1]), np.array([0.1]), np.array([0.1]), np.zeros(1),
+                    0.3, 1.0, None, 4, 0.01, np.zeros((1, K.N_OUT)))
+    drv.ledger = True
+    assert drv.cells.shape[0] == K.work_rows(True) and np.array_equal(drv.U, U)
