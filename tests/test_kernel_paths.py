@@ -240,8 +240,9 @@ def test_commit_census_counts_the_cells_that_slid_and_those_whose_path_bends():
     """The ledger's census in the inner cells' commit (``_commit`` with ``census``): the cells
     that slid, of those the ones that did not start at their limit on the side they end on (a
     creep reversal, or a stuck cell that starts to slide), and the signed count (+1 at +L,
-    -1 at -L) of the others, which stayed at their limit, against a plain count; the commit
-    itself is the one without the census.  Start limit = end limit - (alpha + beta i);
+    -1 at -L) of those that slid, against a plain count; the commit itself is the one
+    without the census.  ``_impulse_fix`` returns the signed count of the bent ones, so that
+    the difference counts the cells held at their limit.  Start limit = end limit - (alpha + beta i);
     here alpha = 0.05, beta = 0.01."""
     n = 12
     W = np.zeros((K.work_rows(True), n))
@@ -259,6 +260,12 @@ def test_commit_census_counts_the_cells_that_slid_and_those_whose_path_bends():
     held = np.where(slid & ~bends, np.sign(b), 0.0)
     assert slid.sum() >= 6 and bends.sum() >= 3 and (held > 0).any() and (held < 0).any(), (
         slid, bends, held)
+    # several cells in one call (one creep): every cell of both signs, the packed count
+    Wn = W.copy()
+    got = K._commit(Wn, 0, n - 1, 0, n - 1, dxdt, 3.0, 2.0, 0.2, None, None, (0.05, 0.01))
+    bn = W[K.W_A] + dxdt * 3.0
+    sl = np.abs(bn) > L1
+    assert got[3] == sl.sum() and got[5] == np.sign(bn[sl]).sum(), (got[3:], sl)
     for i in range(n):  # one cell at a time, each with its own creep s
         Wi = W.copy()
         got = K._commit(Wi, i, i, i, i, dxdt, s[i], 2.0, 0.2, None, None, (0.05, 0.01))
@@ -266,8 +273,20 @@ def test_commit_census_counts_the_cells_that_slid_and_those_whose_path_bends():
         plain = K._commit(Wr, i, i, i, i, dxdt, s[i], 2.0, 0.2, None, None, None)
         assert got[:3] == plain[:3], f"cell {i}: the census changed the commit"
         np.testing.assert_array_equal(Wi, Wr, err_msg=f"cell {i}: the census changed a row")
-        want = (int(slid[i]), int(bends[i]), held[i])
+        want = (int(slid[i]), int(bends[i]), float(np.sign(b[i])) if slid[i] else 0.0)
         assert got[3:] == want, f"cell {i}: census {got[3:]}, plain count {want}"
+    # _impulse_fix's signed count of the bent cells (its start limits from the geometry: here
+    # the end limits, patch centre fixed), against a plain count
+    x_lo, dx, c0, muEG, d, inv3R = -6.0, 1.0, 0.0, 0.1, 40.0, 0.01
+    Wf = np.zeros((K.work_rows(True), n))
+    Lg = np.array([K._inner_limit(x_lo, dx, i, c0, muEG, d, inv3R) for i in range(n)])
+    Wf[K.W_L + K.L_LIMIT] = Lg
+    Wf[K.W_A] = Lg * np.array([1, -1, 0.2, -0.3, 1, -1, 0.5, -0.5, 1, 0.9, -1, 0.0])
+    for sc in (20.0, -20.0):
+        bf = Wf[K.W_A] + dxdt * sc
+        kinks = (np.abs(bf) > Lg) & ~((Wf[K.W_A] * bf > 0) & (np.abs(Wf[K.W_A]) >= Lg * (1 - 1e-9)))
+        _fix, n_bent = K._impulse_fix(Wf, 0, n - 1, x_lo, dx, c0, muEG, d, inv3R, dxdt, sc)
+        assert kinks.sum() >= 4 and n_bent == np.sign(bf[kinks]).sum(), (sc, n_bent, kinks)
 
 
 def test_ledger_impulse_is_accurate_at_creep_reversals():
@@ -317,7 +336,7 @@ def test_ledger_impulse_in_steady_partial_slip(mu, bounds):
     runner at rest, 64 cells per a1), per-tick impulse against 4096 sub-steps per tick: within
     1e-4 / 1e-5 of the largest at 16 / 64 sub-steps for mu 0.2 (measured 1.5e-5 / 1.9e-6),
     5e-4 / 1e-4 for mu 1 (1.1e-4 / 2.2e-5), and falling at least 4x from 16 to 64.  Each edge
-    cell takes its own mean (``_edge_mean``: exact where it sticks or slides all through) and
+    cell takes its own integral (``_edge_impulse``: exact where it sticks or slides all through) and
     the inner cells at their limit the curvature term: with the inner cells corrected alone
     (fd98fb5) this measured 6.9e-4 / 4.3e-5 and 2.6e-3 / 1.9e-4, the trapezoid on T alone
     8.3e-5 / 6.1e-6 and 6.9e-5 / 4.0e-6 (README, "Impulse and work with finite friction")."""
