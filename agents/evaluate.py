@@ -544,11 +544,13 @@ def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path) -> Path:
 
     tol = rolling_env.scenes.load_scene(scene).tolerance
     fig, ax = plt.subplots(1, 3, figsize=(16, 4.2))
+    colors = {name: f"C{i % 10}" for i, name in enumerate(trajectories)}  # one per controller,
+    # the same in every panel
     for name, data in trajectories.items():
         ls = "--" if name in BASELINES else "-"
-        ax[0].plot(data["t"] * 1e3, data["xstar"] * 1e9, ls, label=name)
+        ax[0].plot(data["t"] * 1e3, data["xstar"] * 1e9, ls, label=name, color=colors[name])
         ax[1].semilogy(data["t"] * 1e3, np.maximum(np.abs(data["error"]) / tol, 1e-3), ls,
-                       label=name)
+                       label=name, color=colors[name])
     first = next(iter(trajectories.values()))
     ax[0].plot(first["t"] * 1e3, first["target"] * 1e9, "k:", label="target")
     ax[0].set(xlabel="t [ms]", ylabel="runner x* [nm]",
@@ -561,8 +563,9 @@ def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path) -> Path:
         curve = learning_curve(run)
         if curve is not None:
             steps, mean, std = curve
-            ax[2].plot(steps, mean, label=run.name)
-            ax[2].fill_between(steps, mean - std, mean + std, alpha=0.2)
+            ax[2].plot(steps, mean, label=run.name, color=colors.get(run.name))
+            ax[2].fill_between(steps, mean - std, mean + std, alpha=0.2,
+                               color=colors.get(run.name))
     ax[2].set(xlabel="env steps", ylabel="eval return (mean ± std over episodes)",
               title="learning curves (EvalCallback)")
     if ax[2].lines:
