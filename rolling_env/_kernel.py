@@ -899,7 +899,8 @@ def _edge_impulse(U0, Ut, Li, I_free, s, xL, xR, c0, u, dt, a, d, inv3R, muEG):
     IB s); IL: the limit's exact time integral (``_limit_integral``).
     * At its limit at the start on the side the creep pushes it (or entering the contact in
       the sub-step) and beyond it at the end, or leaving the contact: it slid all through,
-      +-IL (exact, unless it entered stuck and started to slide within the sub-step).
+      +-IL (exact; the smaller of IL and |I_free| for one that entered stuck and started to
+      slide within the sub-step, both bounds of its integral).
     * Inside its limits at both ends: I_free (exact if it stays inside in between), at most
       IL in size (a cell that leaves the contact can go beyond its limit in between and end
       with nothing).
@@ -914,7 +915,9 @@ def _edge_impulse(U0, Ut, Li, I_free, s, xL, xR, c0, u, dt, a, d, inv3R, muEG):
     held = abs(U0) >= L0 * (1.0 - 1e-9) and U0 * sg >= 0.0 and U0 * s >= 0.0
     over = abs(Ut) > Li
     if held and (over or (U0 != 0.0 and Li == 0.0)):
-        return math.copysign(IL, sg)
+        # at most the free path's integral too (the clipped content is at most both): an
+        # entering cell that stuck for part of the sub-step is nearer it than its limit
+        return math.copysign(min(IL, abs(I_free)) if I_free * sg > 0.0 else IL, sg)
     if not over and not (held and U0 != 0.0):
         return math.copysign(min(abs(I_free), IL), I_free)
     g0 = abs(U0) - L0
