@@ -259,9 +259,14 @@ def scene_runs(scene: str, runs: Path | None) -> list[Path]:
     ``*.overwrite`` folders (a replacement run that failed or was stopped) are not runs."""
     if runs is None:
         return []
-    return sorted(p for p in (runs / scene_key(scene)).glob("*")
-                  if p.is_dir() and not p.name.startswith(".")
-                  and not p.name.endswith(".overwrite"))
+    return sorted((p for p in (runs / scene_key(scene)).glob("*")
+                   if p.is_dir() and not p.name.startswith(".")
+                   and not p.name.endswith(".overwrite")), key=_natural)
+
+
+def _natural(path: Path) -> list:
+    """Sort key that orders numbers by value: ppo_seed2 before ppo_seed10."""
+    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", path.name)]
 
 
 def controllers_for(scene: str, runs: Path | None, env, model: str = "final") -> dict:
@@ -274,6 +279,10 @@ def controllers_for(scene: str, runs: Path | None, env, model: str = "final") ->
              "eq32-feedback": Eq32Feedback.from_env(env)}
     for run in scene_runs(scene, runs):
         files = agent_files(run, model)
+        if not files:
+            print(f"warning: {run} has no model (model.zip, checkpoint.zip or, with --model "
+                  "best, best_model.zip): it is not evaluated (its learning curve is plotted)",
+                  file=sys.stderr)
         if files:
             if run.name in BASELINES:
                 raise ValueError(f"run folder {str(run)!r} has the name of a baseline: rename "
@@ -436,18 +445,18 @@ def seed_summary(rows: list[dict]) -> list[dict]:
         if len(rs) < 2:
             continue
         kinds = {(r.get("config_key"), r.get("model_file"), r.get("train_env_steps")) for r in rs}
-        if len(kinds) > 1:
+        seeds = [int(_SEED_SUFFIX.match(r["controller"])["seed"]) for r in rs]
+        if len(kinds) > 1 or len(set(seeds)) < len(seeds):
             print(f"warning: {scene}: {', '.join(r['controller'] for r in rs)} are not summed "
                   "up over seeds: their configurations (config.yml less the seed), model files "
-                  "or training steps differ", file=sys.stderr)
+                  "or training steps differ, or two of them name one seed", file=sys.stderr)
             continue
         err = np.array([r["final_abs_error_mean"] / r["tolerance"] for r in rs])
         slip = np.array([r["slip_work_mean"] for r in rs])
         met = [verdicts[(scene, r["controller"])]["met"] for r in rs
                if (scene, r["controller"]) in verdicts]
         out.append({"scene": scene, "agent": name, "seeds": len(rs),
-                    "seed_list": sorted(int(_SEED_SUFFIX.match(r["controller"])["seed"])
-                                        for r in rs),
+                    "seed_list": sorted(seeds),
                     "error_mean": float(err.mean()), "error_min": float(err.min()),
                     "error_max": float(err.max()), "slip_mean": float(slip.mean()),
                     "slip_min": float(slip.min()), "slip_max": float(slip.max()),
@@ -488,7 +497,7 @@ def write_tables(rows: list[dict], out: Path, episodes: int | None = None,
              f"the {MACHINE} (shared with concurrent jobs); baselines need none.  Agents: "
              + ("the final model of each run (`--model final`)" if model == "final" else
                 "EvalCallback's best model of each run where it has one with its statistics, "
-                "else its final model (`--model best`)")
+                "else its final model or checkpoint (`--model best`)")
              + "; *model* names the file evaluated.", "",
              "| scene | controller | model | final abs error / tol (mean ± std) | RMS error / "
              "tol | reached | settle [ms] | slip work [nJ] (mean ± std) | training (env steps, "
@@ -563,9 +572,9 @@ def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path) -> Path:
         curve = learning_curve(run)
         if curve is not None:
             steps, mean, std = curve
-            ax[2].plot(steps, mean, label=run.name, color=colors.get(run.name))
-            ax[2].fill_between(steps, mean - std, mean + std, alpha=0.2,
-                               color=colors.get(run.name))
+            color = colors.get(run.name, "0.5")  # grey: a run without a model
+            ax[2].plot(steps, mean, label=run.name, color=color)
+            ax[2].fill_between(steps, mean - std, mean + std, alpha=0.2, color=color)
     ax[2].set(xlabel="env steps", ylabel="eval return (mean ± std over episodes)",
               title="learning curves (EvalCallback)")
     if ax[2].lines:

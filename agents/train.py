@@ -6,8 +6,9 @@ Hyper-parameters come from ``configs/hyperparams/<algo>.yml`` (RL Zoo format, ke
 The run folder (default ``runs/<scene key>/<algo>_seed<seed>``, ``common.scene_key``: the
 scene's name, a scene file's stem, or ``<stem>-<digest8>`` for a file named like a shipped
 scene with other content) keeps config.yml (with the scene's fields and digest), command.txt,
-meta.json (seed, package versions, env steps, wall time), the TensorBoard log (tb/), the
-EvalCallback log (evaluations.npz) and best model, periodic checkpoints, and the final
+meta.json (seed, package versions, env steps, wall time, git commit, thread settings), the
+TensorBoard log (tb/), the EvalCallback log (evaluations.npz) and best model, periodic
+checkpoints, and the final
 model.zip with model_vecnormalize.pkl beside it.  Every file is written atomically; Ctrl-C or
 SIGTERM saves a final checkpoint before exiting with 130 / 143 (128 + the signal).  A run
 folder that already holds files is refused (``--overwrite`` replaces it, if it is a folder
@@ -39,6 +40,26 @@ from .common import (ALGOS, action_noise, atomic_write, buildable_scene, check_h
                      scene_fields, scene_key)
 
 SEED_MAX = 2**31 - 1 - 10_000  # the evaluation env is seeded seed + 10000
+#: thread settings recorded in meta.json (none changes a transition; torch runs on one thread)
+THREAD_VARS = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS")
+
+
+def source_commit() -> str | None:
+    """The git commit of the code that trained (with "-dirty" where tracked files differ),
+    None outside a git checkout or without git."""
+    import subprocess
+    root = Path(__file__).resolve().parent.parent
+    try:
+        head = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True,
+                              text=True, timeout=10)
+        if head.returncode != 0:
+            return None
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain",
+                                "--untracked-files=no"], capture_output=True, text=True,
+                               timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return head.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
 
 def build_parser():
     p = argparse.ArgumentParser(prog="python -m agents.train", description=__doc__.splitlines()[0])
@@ -324,6 +345,7 @@ def train(args) -> Path:
         "rolling_drive": rolling_env.__version__, "stable_baselines3": sb3.__version__,
         "torch": torch.__version__, "python": platform.python_version(),
         "machine": f"{platform.machine()}, {os.cpu_count()} CPU cores, no GPU",
+        "commit": source_commit(), "threads": {k: os.environ.get(k) for k in THREAD_VARS},
     }
     atomic_write(work / "meta.json", lambda p: Path(p).write_text(json.dumps(meta, indent=1)))
     print(json.dumps(meta))

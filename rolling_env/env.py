@@ -119,7 +119,7 @@ class RollingDriveEnv(gym.Env):
                              f" got {render_mode!r}")
         self.render_mode = render_mode
         self.drive, self.a_max = build_drive(self.scene)
-        self.drive.ledger = False  # the env kernel leaves the energy ledger out
+        self.drive.for_env()  # the env kernel leaves the energy ledger (and its rows) out
         self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
         self.observation_space = spaces.Box(-OBS_BOUND, OBS_BOUND, (len(OBS_NAMES),), np.float32)
         self.dt = self.scene.dt

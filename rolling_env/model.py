@@ -228,20 +228,44 @@ class Drive(CellViews):
     @property
     def ledger(self) -> bool:
         """Whether this drive keeps the impulse and energy ledger (``Drive.run``, the default).
-        The env sets it False: its kernel leaves the ledger out, and the work array drops the
-        rows only the ledger reads (``_kernel.work_rows``; the contents are kept)."""
+        Switched off, the work array drops the rows only the ledger reads
+        (``_kernel.work_rows``; the contents are kept) and ``Drive.run`` refuses the drive.
+        An env's drive is switched off for good (``for_env``)."""
         return self._ledger
 
     @ledger.setter
     def ledger(self, keep: bool) -> None:
         keep = bool(keep)
-        rows = K.work_rows(self._mu is not None, keep)
+        if getattr(self, "_env_owned", False) and keep != self._ledger:
+            raise RuntimeError("this drive belongs to an env, whose kernel keeps no energy "
+                               "ledger and steps the drive's arrays in place: its ledger "
+                               "stays off; build a Drive of its own for Drive.run")
+        self._fit_rows(keep)
+        self._ledger = keep
+
+    def _fit_rows(self, ledger: bool) -> None:
+        """Give the work array the rows the kernel needs with or without the ledger."""
+        rows = K.work_rows(self._mu is not None, ledger)
         if rows != self.cells.shape[0]:
             cells = np.zeros((rows, self.cells.shape[1]))
             m = min(rows, self.cells.shape[0])
             cells[:m] = self.cells[:m]
             self.cells = cells
-        self._ledger = keep
+
+    def for_env(self) -> "Drive":
+        """Switch the ledger off for good: the env's kernel keeps none and binds views of the
+        drive's arrays once, which a later change of the rows would leave behind."""
+        self.ledger = False
+        self._env_owned = True
+        return self
+
+    def __setstate__(self, state):
+        # drives pickled before the ledger had rows of its own (a plain ``ledger`` attribute,
+        # the work array of either kernel) load with the rows their ledger setting needs
+        if "ledger" in state:
+            state["_ledger"] = state.pop("ledger")
+        self.__dict__.update(state)
+        self._fit_rows(self._ledger)
 
     # ------------------------------------------------------------------ state
     def reset(self, c0: float = 0.0, vstar0: float = 0.0) -> None:
@@ -316,9 +340,10 @@ class Drive(CellViews):
         ledger's rows.
         """
         if not self._ledger:
-            raise RuntimeError("this drive is stepped by the env kernel (ledger off): Drive.run "
-                               "keeps the energy ledger, which this drive has not kept; build "
-                               "a Drive of its own, or set drive.ledger = True and reset it")
+            raise RuntimeError("this drive's ledger is off (an env's drive, or drive.ledger = "
+                               "False): Drive.run keeps the energy ledger, which this drive "
+                               "has not kept; build a Drive of its own (or, for a drive of "
+                               "your own, set drive.ledger = True and reset it)")
         check_range("dt_tick", dt_tick, 0.0, _INF, lo_open=True, hi_open=True)
         n_sub = check_n_sub(n_sub)
         self._check_state_valid()

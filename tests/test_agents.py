@@ -181,6 +181,11 @@ def test_short_training_run_saves_loadable_model(tmp_path):
         assert (run / f).exists(), f"missing {f}"
     meta = json.loads((run / "meta.json").read_text())
     assert meta["env_steps"] >= 512 and meta["seed"] == 3 and not meta["interrupted"]
+    head = subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True,
+                          text=True)
+    if head.returncode == 0:  # a git checkout: the run records the code that trained it
+        assert meta["commit"].split("-")[0] == head.stdout.strip(), meta["commit"]
+    assert set(meta["threads"]) == {"NUMBA_NUM_THREADS", "OMP_NUM_THREADS"}, meta
     env = rolling_env.make("default")
     agent = load_agent(run / "model.zip", env)
     data = rollout(env, agent, seed=0, target=2e-7)
@@ -273,6 +278,8 @@ def test_seed_summary_sums_up_runs_that_differ_only_in_their_seed():
     assert (g["error_min"], g["error_max"]) == pytest.approx((0.5, 1.0), rel=1e-12), g
     assert g["slip_mean"] == pytest.approx(3.0, rel=1e-12), g
     assert (g["met"], g["judged"]) == (2, 3), f"goal met in seeds 0 and 1 only: {g}"
+    # two runs naming one seed (ppo_seed1, ppo_seed01) are not two seeds
+    assert seed_summary(rows + [row("ppo_seed01", 0.7, 2.0)]) == []
     # an interrupted run (its checkpoint, fewer steps) or another configuration is not a seed
     for key, value in (("model_file", "checkpoint.zip"), ("train_env_steps", 20_000),
                        ("config_key", '{"n_timesteps": 1000}')):
@@ -502,21 +509,29 @@ def test_evaluate_finds_the_runs_of_a_scene_file(trained_run, tmp_path):
     assert sorted(p.name for p in scene.parent.iterdir()) == ["myscene.yaml"]
 
 
-def test_evaluate_model_choice_and_seed_summary(trained_run, tmp_path):
+def test_evaluate_model_choice_and_seed_summary(trained_run, tmp_path, capsys):
     """--model final (the default) evaluates model.zip and --model best best_model.zip, and the
     table names the file of each row; two seeds of one configuration get an "Over seeds"
-    row (here the same model twice: its range is one value)."""
+    row (here the same model twice: its range is one value).  A run folder without a model
+    (an interrupted run whose checkpoint was not copied) is named in a warning, not dropped
+    silently; run folders are listed in the order of their numbers (seed 2 before 10)."""
     import shutil
 
-    from agents.evaluate import main as evaluate_main
+    from agents.evaluate import main as evaluate_main, scene_runs
     scene, runs = trained_run
     mine = tmp_path / "runs"
     shutil.copytree(runs, mine)
     shutil.copytree(mine / "myscene" / "ppo_seed0", mine / "myscene" / "ppo_seed1")
+    (mine / "myscene" / "ppo_seed10").mkdir()
+    shutil.copy(mine / "myscene" / "ppo_seed0" / "config.yml", mine / "myscene" / "ppo_seed10")
+    assert [p.name for p in scene_runs(str(scene), mine)] == ["ppo_seed0", "ppo_seed1",
+                                                              "ppo_seed10"]
     for model, name in (("final", "model.zip"), ("best", "best_model.zip")):
         out = tmp_path / model
         argv = ["--scenes", str(scene), "--runs", str(mine), "--episodes", "2", "--out", str(out)]
         assert evaluate_main(argv + ([] if model == "final" else ["--model", model])) == 0
+        err = capsys.readouterr().err
+        assert "ppo_seed10 has no model" in err and "not evaluated" in err, err
         with open(out / "comparison.csv") as f:
             rows = {r["controller"]: r for r in csv.DictReader(f)}
         assert rows["ppo_seed0"]["model_file"] == name, f"--model {model}: {rows['ppo_seed0']}"
