@@ -283,7 +283,7 @@ def controllers_for(scene: str, runs: Path | None, env, model: str = "final") ->
             print(f"warning: {run} has no model (model.zip, checkpoint.zip or, with --model "
                   "best, best_model.zip): it is not evaluated (its learning curve is plotted)",
                   file=sys.stderr)
-        if files:
+        else:
             if run.name in BASELINES:
                 raise ValueError(f"run folder {str(run)!r} has the name of a baseline: rename "
                                  "it (its row would replace the baseline's)")
@@ -439,13 +439,14 @@ def seed_summary(rows: list[dict]) -> list[dict]:
         m = _SEED_SUFFIX.match(r["controller"])
         if r["controller"] in BASELINES or m is None:
             continue
-        groups.setdefault((r["scene"], m["name"]), []).append(r)
+        groups.setdefault((r["scene"], m["name"]), []).append((r, int(m["seed"])))
     out = []
-    for (scene, name), rs in groups.items():
-        if len(rs) < 2:
+    for (scene, name), members in groups.items():
+        if len(members) < 2:
             continue
+        rs = [r for r, _ in members]
+        seeds = [seed for _, seed in members]
         kinds = {(r.get("config_key"), r.get("model_file"), r.get("train_env_steps")) for r in rs}
-        seeds = [int(_SEED_SUFFIX.match(r["controller"])["seed"]) for r in rs]
         if len(kinds) > 1 or len(set(seeds)) < len(seeds):
             print(f"warning: {scene}: {', '.join(r['controller'] for r in rs)} are not summed "
                   "up over seeds: their configurations (config.yml less the seed), model files "

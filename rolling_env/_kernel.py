@@ -863,13 +863,18 @@ def _impulse_fix(W, j0, j1, x_lo, dx, c0, muEG, d, inv3R, dxdt, s):
 
 
 @njit(inline="always", **JIT)
+def _uN_integral(zc, d, inv3R):
+    """F(zc) = d zc - zc^3 / (3R), the integral of uN = d - z^2 / R from the patch centre to
+    zc (inside the contact, |zc| <= a)."""
+    return zc * (d - zc * zc * inv3R)
+
+
+@njit(inline="always", **JIT)
 def _uN_antiderivative(z, a, d, inv3R):
-    """H(z) with H' = F(clamp(z, -a, a)), F(z) = d z - z^3 / (3R) the integral of uN = d -
-    z^2 / R from the patch centre to z: d z^2 / 2 - z^4 / (12 R) inside the contact, linear
-    outside (continuous)."""
+    """H(z) with H' = F(clamp(z, -a, a)) (``_uN_integral``): d z^2 / 2 - z^4 / (12 R) inside
+    the contact, linear outside (continuous)."""
     zc = min(max(z, -a), a)
-    F = zc * (d - zc * zc * inv3R)
-    return zc * zc * (0.5 * d - 0.25 * zc * zc * inv3R) + F * (z - zc)
+    return zc * zc * (0.5 * d - 0.25 * zc * zc * inv3R) + _uN_integral(zc, d, inv3R) * (z - zc)
 
 
 @njit(inline="always", **JIT)
@@ -882,9 +887,8 @@ def _limit_integral(xL, xR, c0, u, dt, a, d, inv3R, muEG):
     h = u * dt
     if abs(h) <= 1e-5 * a:
         cm = c0 + 0.5 * h
-        zr = min(max(xR - cm, -a), a)
-        zl = min(max(xL - cm, -a), a)
-        return muEG * dt * (zr * (d - zr * zr * inv3R) - zl * (d - zl * zl * inv3R))
+        return muEG * dt * (_uN_integral(min(max(xR - cm, -a), a), d, inv3R)
+                            - _uN_integral(min(max(xL - cm, -a), a), d, inv3R))
     c1 = c0 + h
     H = _uN_antiderivative
     return muEG * ((H(xR - c0, a, d, inv3R) - H(xR - c1, a, d, inv3R))

@@ -119,7 +119,6 @@ class RollingDriveEnv(gym.Env):
                              f" got {render_mode!r}")
         self.render_mode = render_mode
         self.drive, self.a_max = build_drive(self.scene)
-        self.drive.for_env()  # the env kernel leaves the energy ledger (and its rows) out
         self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
         self.observation_space = spaces.Box(-OBS_BOUND, OBS_BOUND, (len(OBS_NAMES),), np.float32)
         self.dt = self.scene.dt
@@ -212,14 +211,16 @@ class RollingDriveEnv(gym.Env):
 
 def build_drive(scene: Scene) -> tuple[Drive, float]:
     """The spring row of a scene: grid over the rolling stroke, a_ref = a_max = contact radius
-    at N_max, time scale = the nominal period."""
+    at N_max, time scale = the nominal period; without the energy ledger (the env kernel
+    keeps none)."""
     sc = scene
     params = DriveParams(sc.R, sc.E_star, sc.G_star, mu=sc.mu, m=sc.runner_mass, F_ext=sc.F_ext)
     d_max = (3 * sc.N_max / (4 * sc.E_star * math.sqrt(sc.R))) ** (2 / 3)
     a_max = math.sqrt(sc.R * d_max)
     try:
         drive = Drive(params, a_ref=a_max, resolution=sc.resolution,
-                      stroke=(-sc.stroke_roll, sc.stroke_roll), a_max=a_max, t_ref=sc.period)
+                      stroke=(-sc.stroke_roll, sc.stroke_roll), a_max=a_max, t_ref=sc.period,
+                      ledger=False)  # the env kernel leaves the energy ledger out
     except ValueError as e:  # the Drive's message names its own arguments: map them to keys
         raise ValueError(
             f"scene '{sc.name}' cannot be built: {e} (the env builds the drive from the scene "

@@ -146,11 +146,15 @@ class Drive(CellViews):
         Time scale [s] used inside the kernel (the nominal excitation period is a good choice).
     grid_offset : float
         Shift of the cells by this fraction of a cell (to measure grid-alignment effects).
+    ledger : bool
+        Keep the impulse and energy ledger (``Drive.run``, ``Drive.energy``; the default).
+        False for a drive that the env's kernel steps: it keeps none, and the work array has
+        none of the rows only the ledger reads (``_kernel.work_rows``).
     """
 
     def __init__(self, params: DriveParams, *, a_ref: float, resolution: float,
                  stroke: tuple[float, float], a_max: float, t_ref: float,
-                 grid_offset: float = 0.0):
+                 grid_offset: float = 0.0, ledger: bool = True):
         check_range("a_ref", a_ref, 0.0, _INF, lo_open=True, hi_open=True)
         check_range("resolution", resolution, 0.5, 1e5)
         check_range("a_max", a_max, 0.0, _INF, lo_open=True, hi_open=True)
@@ -189,9 +193,9 @@ class Drive(CellViews):
             self._mu = min(self._mu, MU_EG_MAX / self._p[K.P_E_OVER_G])
         # cell work array: contents U, build rows A and B and, with friction only, the friction
         # work rows L (limits, edge release coefficients); U, A, B and L are views of it
-        self.cells = np.zeros((K.work_rows(finite_mu), n))
+        self._ledger = bool(ledger)  # run() keeps the ledger; the env kernel does not
+        self.cells = np.zeros((K.work_rows(finite_mu, self._ledger), n))
         self.st = np.zeros(K.N_STATE)
-        self._ledger = True  # run() keeps the impulse and energy ledger; the env kernel does not
 
     def _check_scales(self):
         """The kernel works in units of a_ref, t_ref and G* a_ref^2: every scale and scaled
@@ -227,45 +231,21 @@ class Drive(CellViews):
 
     @property
     def ledger(self) -> bool:
-        """Whether this drive keeps the impulse and energy ledger (``Drive.run``, the default).
-        Switched off, the work array drops the rows only the ledger reads
-        (``_kernel.work_rows``; the contents are kept) and ``Drive.run`` refuses the drive.
-        An env's drive is switched off for good (``for_env``)."""
+        """Whether this drive keeps the impulse and energy ledger (set at construction)."""
         return self._ledger
 
-    @ledger.setter
-    def ledger(self, keep: bool) -> None:
-        keep = bool(keep)
-        if getattr(self, "_env_owned", False) and keep != self._ledger:
-            raise RuntimeError("this drive belongs to an env, whose kernel keeps no energy "
-                               "ledger and steps the drive's arrays in place: its ledger "
-                               "stays off; build a Drive of its own for Drive.run")
-        self._fit_rows(keep)
-        self._ledger = keep
-
-    def _fit_rows(self, ledger: bool) -> None:
-        """Give the work array the rows the kernel needs with or without the ledger."""
-        rows = K.work_rows(self._mu is not None, ledger)
+    def __setstate__(self, state):
+        # drives pickled before the ledger had rows of its own (a plain ``ledger`` attribute,
+        # the work array of either kernel) load with the rows their setting needs
+        if "ledger" in state:
+            state["_ledger"] = state.pop("ledger")
+        self.__dict__.update(state)
+        rows = K.work_rows(self._mu is not None, self._ledger)
         if rows != self.cells.shape[0]:
             cells = np.zeros((rows, self.cells.shape[1]))
             m = min(rows, self.cells.shape[0])
             cells[:m] = self.cells[:m]
             self.cells = cells
-
-    def for_env(self) -> "Drive":
-        """Switch the ledger off for good: the env's kernel keeps none and binds views of the
-        drive's arrays once, which a later change of the rows would leave behind."""
-        self.ledger = False
-        self._env_owned = True
-        return self
-
-    def __setstate__(self, state):
-        # drives pickled before the ledger had rows of its own (a plain ``ledger`` attribute,
-        # the work array of either kernel) load with the rows their ledger setting needs
-        if "ledger" in state:
-            state["_ledger"] = state.pop("ledger")
-        self.__dict__.update(state)
-        self._fit_rows(self._ledger)
 
     # ------------------------------------------------------------------ state
     def reset(self, c0: float = 0.0, vstar0: float = 0.0) -> None:
@@ -335,15 +315,14 @@ class Drive(CellViews):
         history: a partly slipping contact that comes to rest unloads from its limits and
         reads 1.0.
         A massless runner (m = 0) under a load with no force equilibrium (|F_ext| above mu N,
-        or any load without contact) raises ValueError.  A drive whose ``ledger`` is off (an
-        env's) raises RuntimeError: its ledger is not kept, and its work array lacks the
+        or any load without contact) raises ValueError.  A drive built with ``ledger=False``
+        (an env's) raises RuntimeError: its ledger is not kept, and its work array lacks the
         ledger's rows.
         """
         if not self._ledger:
-            raise RuntimeError("this drive's ledger is off (an env's drive, or drive.ledger = "
-                               "False): Drive.run keeps the energy ledger, which this drive "
-                               "has not kept; build a Drive of its own (or, for a drive of "
-                               "your own, set drive.ledger = True and reset it)")
+            raise RuntimeError("this drive was built without the energy ledger (an env's "
+                               "drive, ledger=False): Drive.run keeps the ledger, which this "
+                               "drive has not kept; build a Drive with ledger=True")
         check_range("dt_tick", dt_tick, 0.0, _INF, lo_open=True, hi_open=True)
         n_sub = check_n_sub(n_sub)
         self._check_state_valid()

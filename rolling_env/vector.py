@@ -88,7 +88,6 @@ class BatchCore(CellViews):
         self.scene = load_scene(scene, **overrides)
         self.max_episode_steps = check_time_limit(max_episode_steps, self.scene)
         drive, self.a_max = build_drive(self.scene)
-        drive.for_env()  # the env kernel leaves the energy ledger (and its rows) out
         self.drive = drive  # template (grid, scales)
         self.features = drive.kernel_features + (None,)  # (mu, mass, load, ledger)
         self.sv = EK.scene_vector(self.scene, self.a_max, drive)

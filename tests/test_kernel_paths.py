@@ -363,7 +363,8 @@ def test_ledger_impulse_in_steady_full_sliding_is_exact():
     rest): T = mu N all through, so every tick after the first (the start from rest) has the
     impulse mu N dt_tick, to 1e-12 of it at only 8 sub-steps per tick (measured 5e-14): the
     edge cells slide all through and take their limit's exact integral, the inner cells the
-    trapezoid with the curvature term."""
+    trapezoid with the curvature term (without it this fails; the trapezoid on T alone,
+    before the per-cell ledger, was exact here too, T being constant)."""
     from rolling_env.model import Drive, DriveParams
     R, E, a1, tau, mu = 1e-3, 115e9, 2e-5, 1e-3, 0.2
     k, u, dt = 6, 5 * a1 / tau, tau / 8
@@ -694,46 +695,42 @@ def test_env_reproduces_the_kernel_before_the_speed_ups(scene):
 
 def test_env_drive_drops_the_ledger_rows_and_refuses_drive_run():
     """The env kernel keeps no energy ledger, so an env's work array has no ledger rows
-    (``work_rows(finite_mu, ledger=False)``; three rows per cell fewer with friction), in the
-    single env and the batched one; ``Drive.run``, which writes those rows, refuses such a
-    drive by name (it would index rows the array lacks) until the ledger is switched back on,
-    which restores the rows and keeps the contents."""
+    (``Drive(..., ledger=False)``, ``work_rows(finite_mu, ledger=False)``: three rows per
+    cell fewer with friction), in the single env and the batched one; ``Drive.run``, which
+    writes those rows, refuses such a drive by name, and ``run_ticks`` such a work array
+    (it would index rows the array lacks).  A drive pickled before the ledger had rows of its
+    own (a plain ``ledger`` attribute and the env's rows) loads with the rows it needs."""
+    import pickle
+
     import rolling_env
     from rolling_env.model import Drive
     from rolling_env.vector import BatchCore
     env = rolling_env.make("default")
     drv = env.unwrapped.drive
+    assert not drv.ledger
     assert drv.cells.shape[0] == K.work_rows(True, False) == K.work_rows(True) - 3, drv.cells.shape
     core = BatchCore(2, "default")
     assert core.cells.shape[1] == K.work_rows(True, False), core.cells.shape
     env.reset(seed=0)
     env.step(np.array([1.0, 0.5, 0.5], dtype=np.float32))
-    U = drv.U.copy()
-    assert np.any(U != 0.0), "no contact after a step"
-    with pytest.raises(RuntimeError, match="ledger is off"):
+    assert np.any(drv.U != 0.0), "no contact after a step"
+    with pytest.raises(RuntimeError, match="without the energy ledger"):
         drv.run(dt_tick=1e-6, n_sub=4, omega_R=[0.1], v=[0.1], N=[0.5])
-    with pytest.raises(RuntimeError, match="belongs to an env"):  # its arrays are bound
-        drv.ledger = True
     W, st, p = drv.cells.copy(), drv.st.copy(), drv._p
     with pytest.raises(ValueError, match="lacks the energy ledger's rows"):  # not past the rows
         K.run_ticks(W, st, p, np.array([0.1]), np.array([0.1]), np.array([0.1]), np.zeros(1),
                     0.3, 1.0, None, 4, 0.01, np.zeros((1, K.N_OUT)))
     own = Drive(drv.params, a_ref=drv.L0, resolution=8, stroke=(-1e-4, 1e-4), a_max=drv.L0,
                 t_ref=drv.t0)
-    own.ledger = False
+    assert own.ledger and own.cells.shape[0] == K.work_rows(True)
     own.U[:] = np.linspace(0.0, 1.0, own.U.size)
-    U = own.U.copy()
-    own.ledger = True  # a drive of one's own switches back: rows restored, contents kept
-    assert own.cells.shape[0] == K.work_rows(True) and np.array_equal(own.U, U)
-    import pickle
-    old = pickle.loads(pickle.dumps(own))
-    state = old.__dict__.copy()  # as pickled before the ledger had rows of its own
-    state["ledger"] = state.pop("_ledger")
+    state = pickle.loads(pickle.dumps(own)).__dict__.copy()  # as pickled before: a plain
+    state["ledger"] = state.pop("_ledger")                  # attribute, the env's rows
     state["cells"] = state["cells"][:K.work_rows(True, False)]
     older = Drive.__new__(Drive)
     older.__setstate__(state)
     assert older.ledger and older.cells.shape[0] == K.work_rows(True), older.cells.shape
-    assert np.array_equal(older.U, U)
+    assert np.array_equal(older.U, own.U)
 
 
 def _clipped_walk_integral(U0, s, xL, xR, c0, u, dt, a, d, inv3R, muEG, m=4000):
