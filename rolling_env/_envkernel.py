@@ -212,9 +212,9 @@ def scene_vector(scene, a_max: float, drive) -> np.ndarray:
     sv[[S_DT, S_L0, S_T0, S_F0, S_W0, S_TMAX, S_VREF, S_TREF, S_WREF]] = (
         sc.dt, drive.L0, drive.t0, drive.F0, drive.W0, sc.target_max, v_ref, T_ref, wear_ref)
     sv[[S_WTRACK, S_WWEAR, S_TPP, S_EPISODE, S_NSUB]] = (
-        sc.w_track, sc.w_wear, tpp, sc.episode_steps, sc.sub_steps)
+        sc.w_track, sc.w_wear, tpp, sc.episode_steps, sc.n_sub)
     sv[[S_HERTZ, S_TS, S_DTSUB]] = (3.0 / (4.0 * sc.E_star * math.sqrt(sc.R)),
-                                    drive.t0 / drive.L0, sc.dt / sc.sub_steps / drive.t0)
+                                    drive.t0 / drive.L0, sc.dt / sc.n_sub / drive.t0)
     sv[S_INV_L0:N_SV] = 1.0 / sv[[S_L0, S_TMAX, S_VREF, S_STROKE_R, S_STROKE_T, S_N_MAX, S_TREF,
                                    S_EPISODE, S_WREF]]
     return sv

@@ -103,6 +103,10 @@ ST_KIN0 = 17    # runner's kinetic energy at reset: the ledger's starting balanc
                 # Drive.reset, read by Drive.energy; the kernel never touches it)
 N_STATE = 18
 
+# (omega_n dt)^2 (omega_n on the stuck contact) at which the runner step is half-way from
+# the exact (piecewise) scheme to backward Euler (``_blend``)
+THETA2_BLEND = 4.0
+
 FLAG_GRID = 1       # the contact reached the end of the spring row
 FLAG_NONFINITE = 2  # a non-finite value appeared (kernel stopped)
 FLAG_SLIDE = 4      # massless runner with no force equilibrium (|F_ext| > mu N)
@@ -130,7 +134,7 @@ L_LIMIT = 0      # friction limit mu E*/G* integral of uN over the cell's part i
 L_E0, L_E1, L_E2 = 1, 2, 3  # released energy of an edge cell this sub-step: e0 + e1 s + e2 s^2
 L_QLIM = 4       # friction limit per unit overlap of an edge cell at the end of the sub-step:
                  # mu E*/G* times the mean uN over its part in contact (0: none in contact)
-N_LCOL = 5       # rows of L in the env kernel; the ledger's kernel has three more:
+N_LCOL = 8       # rows of L (the env's and the ledger's kernels alike), the last three:
 L_U0, L_IA, L_IB = 5, 6, 7  # of an edge cell, its content at the start of the sub-step and
                  # its unclipped integral over it, IA + IB s (``_edge_impulse``)
 N_LCOL_LEDGER = 8
@@ -577,6 +581,39 @@ def _solve_bracketed(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st):
     return vv
 
 
+@njit(**JIT)
+def _solve_runner(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st):
+    """The root of ``_solve_bracketed``'s g, by Newton from ``vv`` on g's pieces, bracketed by
+    the points it visits (bisection once both signs are seen and a step leaves the bracket);
+    where no step is possible (a massless runner with every cell saturated) or Newton does
+    not settle within a few steps, ``_solve_bracketed``.  A step that crossed a kink of the
+    force law usually lands on the next piece, so the root is one or two evaluations away:
+    the full bracket (three passes over the cells before the first Newton step) is rarely
+    needed (a light runner crosses kinks in most sub-steps)."""
+    lo = -np.inf
+    hi = np.inf
+    for _it in range(8):
+        g, _t, sc, dT = _g_eval(A, B, L, i0, i1, s0, vv, v0, mass, F, dt, st)
+        if _converged(g, mass, vv, v0, dt, sc, F):
+            return vv
+        if g > 0.0:
+            hi = vv
+        else:
+            lo = vv
+        gp = mass + dt * dT
+        if not gp > 0.0:
+            break
+        vn = vv - g / gp
+        if not (vn > lo and vn < hi):
+            if not (math.isfinite(lo) and math.isfinite(hi)):
+                break
+            vn = 0.5 * (lo + hi)
+        if hi - lo <= 1e-15 * (abs(lo) + abs(hi)) + 1e-300 and hi - lo < np.inf:
+            return vv
+        vv = vn
+    return _solve_bracketed(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st)
+
+
 @njit(inline="always", **JIT)
 def _g_eval(A, B, L, i0, i1, s0, vv, v0, mass, F, dt, st):
     """g(vv) of ``_solve_bracketed``: returns (g, T, scale, dT/ds), ``scale`` the size of the
@@ -700,7 +737,7 @@ _DOWN = 2.0 ** -26  # _commit's count of a cell that slid down (see there)
 
 
 @njit(fastmath=_FM_INNER, **JIT)
-def _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass, edges, census):
+def _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass, edges, census, drift):
     """Commit of the cells i0..i1, U = A + B s clipped to the friction limit.  Returns (T1,
     Ta, slip, n_slid, n_kinks, n_sign).  ``edges`` None: i0..i1 are inner cells (B = dx dt,
     overlap dx).
@@ -720,7 +757,13 @@ def _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass, edges, census):
     10 periods, 0.012 against 0.010 s).  The cells that slid up and down are counted in one
     float sum, 1 per cell at +L and 2^-26 per cell at -L, exact for rows of up to 2^26 cells
     (the grid has at most 2e7): two integer counts, or a signed count beside n_slid, kept
-    LLVM from vectorising the loop as well (``Drive.run`` 4-20% slower, measured)."""
+    LLVM from vectorising the loop as well (``Drive.run`` 4-20% slower, measured).
+    ``drift``: with friction, the pair (alpha, beta) of ``_limit_drift`` (the inner cells'
+    limits at the start of the sub-step are L - (alpha + beta i)): a sliding inner cell's slip
+    work takes the mean of its limits at the two ends of the sub-step (the trapezoid in time,
+    second order; the end limit alone is first order and low where the limit falls, at the
+    trailing edge).  The edge cells' mean limit per unit overlap is the build pass's
+    ``L_QLIM``."""
     T1 = 0.0
     Ta = 0.0
     slip = 0.0
@@ -737,12 +780,12 @@ def _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass, edges, census):
         Ut = W[W_A, i] + Bi * s
         if mu is not None:
             Li = W[W_L + L_LIMIT, i]
-            q = Li * inv_dx
+            q = (Li - 0.5 * (drift[0] + drift[1] * float(i))) * inv_dx
             if edges is not None:
                 qm = W[W_L + L_QLIM, i]
                 q = q if inner else qm
             if census is not None:
-                L0 = Li - (census[0] + census[1] * i)
+                L0 = Li - (drift[0] + drift[1] * i)
                 n_kinks += 1 if _path_kinks(W[W_A, i], Ut, L0, Li) else 0
             Ut, work, over = _slide(Ut, Li, q)
             slip += work
@@ -934,6 +977,95 @@ def _edge_impulse(U0, Ut, Li, I_free, s, xL, xR, c0, u, dt, a, d, inv3R, muEG):
     return _clip_path(U0, Ut, L0, Li) * dt
 
 
+@njit(inline="always", **JIT)
+def _phis(th2):
+    """cos(th), sin(th)/th, (1 - cos(th))/th^2 and (th - sin(th))/th^3 for th^2 = th2 >= 0
+    (their series below th = 0.1, where the differences would cancel)."""
+    if th2 < 1e-2:
+        c = 1.0 - th2 * (0.5 - th2 * (1.0 / 24.0 - th2 * (1.0 / 720.0 - th2 / 40320.0)))
+        p1 = 1.0 - th2 * (1.0 / 6.0 - th2 * (1.0 / 120.0 - th2 * (1.0 / 5040.0
+                                                                    - th2 / 362880.0)))
+        p2 = 0.5 - th2 * (1.0 / 24.0 - th2 * (1.0 / 720.0 - th2 * (1.0 / 40320.0
+                                                                     - th2 / 3628800.0)))
+        p3 = 1.0 / 6.0 - th2 * (1.0 / 120.0 - th2 * (1.0 / 5040.0 - th2 * (
+            1.0 / 362880.0 - th2 / 39916800.0)))
+        return c, p1, p2, p3
+    th = math.sqrt(th2)
+    sn = math.sin(th)
+    hs = math.sin(0.5 * th)
+    return math.cos(th), sn / th, 2.0 * hs * hs / th2, (th - sn) / (th * th2)
+
+
+@njit(inline="always", **JIT)
+def _blend(th2, tr2):
+    """Weight of the exact runner step against backward Euler's for (omega_n dt)^2 = th2 and
+    a patch travel per sub-step of sqrt(tr2) contact radii: 1 / (1 + q^4) with q = th2 /
+    THETA2_BLEND + tr2; 1 - 4e-3 at omega_n dt = 1, 1/2 at 2, 4e-3 at 4.  A runner ringing at
+    more than a sub-step's phase of about 2 rad is not resolved: the exact step would keep a
+    ringing that the ticks sample at random (and, crossing the friction law's kinks, excite
+    more); backward Euler damps it and tends to the massless runner as the mass vanishes.
+    A patch that moves a contact radius or more within the sub-step renews the contact
+    within it, and the exact step's contact (linear in the runner's displacement, forced by
+    a ramp) no longer describes it; backward Euler's runner sees what the cells see (a
+    constant velocity over the sub-step), so that its energy stays consistent with theirs.
+    The blend leaves the resolved runner exact to 1 - O((omega_n dt)^8 + (u dt / a)^8)."""
+    q = th2 * (1.0 / THETA2_BLEND) + tr2
+    if not q < 1e60:  # also NaN: the exact step would take sin and cos of an overflow
+        return 0.0
+    q = q * q
+    return 1.0 / (1.0 + q * q)
+
+
+@njit(inline="always", **JIT)
+def _runner_linear(mass, k, T0, Tf1, F, v0, dt):
+    """Exact sub-step of a free runner (mass > 0) on a contact whose force is linear in its
+    displacement xi over the sub-step: T = T0 + (Tf1 - T0) t / dt - k xi (Tf1: the force the
+    contact would reach with the runner at rest; k >= 0: the stiffness, G* times the stuck
+    length), so m xi'' = T + F is an oscillator of frequency sqrt(k / m) forced by a ramp.
+    Returns (mean velocity xi(dt) / dt, end velocity, end force T + F).  No numerical
+    damping and no phase error for any sqrt(k / m) dt; k = 0 is a free mass."""
+    th2 = k * dt * dt / mass
+    c, p1, p2, p3 = _phis(th2)
+    f0 = T0 + F
+    dG = Tf1 - T0
+    r = dt / mass
+    vb = v0 * p1 + (f0 * p2 + dG * p3) * r
+    v1 = v0 * c + (f0 * p1 + dG * p2) * r
+    f1 = f0 * c - k * dt * p1 * v0 + dG * p1
+    return vb, v1, f1
+
+
+@njit(inline="always", **JIT)
+def _trailing(i, j0, u):
+    """Edge cell i (outside the inner cells j0..) lies on the contact's trailing side: below
+    the inner cells where the patch moves towards +x, above them where it moves towards -x.
+    Only there does material leave the contact; a leading edge cell's uniform content mixes
+    the entering material at zero deflection, an energy loss of the cell model that is no
+    slip work."""
+    return (i < j0) == (u > 0.0)
+
+
+@njit(inline="always", **JIT)
+def _edge_dissipation(U0, Ut, Uc, Li, I_free, s, xL, xR, c0, c1, u, dt, a, d, inv3R, muEG):
+    """Energy an edge cell dissipated over a sub-step with finite friction: its elastic energy
+    at the start plus the creep work s times the integral of its content (``_edge_impulse``)
+    less its elastic energy at the end (content Uc, clipped).  With finite friction the
+    continuum's material leaves the contact at zero deflection (its friction limit vanishes
+    at the edge), so what the cell releases there is slip work too, done in a layer about
+    |creep| (G*/E*) R / mu wide, mostly thinner than a cell: counted so, the wear converges
+    from coarse grids."""
+    l0 = _overlap(xL, xR, c0, a)
+    l1 = _overlap(xL, xR, c1, a)
+    e0 = 0.5 * U0 * U0 / l0 if l0 > 0.0 else 0.0
+    e1 = 0.5 * Uc * Uc / l1 if l1 > 0.0 else 0.0
+    if l1 > 0.0 and abs(Ut) <= Li and abs(U0) < _edge_limit(xL, xR, c0, a, d, inv3R, muEG)[0]:
+        imp = I_free  # in contact, inside its limits at both ends (the usual case)
+    else:
+        imp = _edge_impulse(U0, Ut, Li, I_free, s, xL, xR, c0, u, dt, a, d, inv3R, muEG)
+    D = e0 + s * imp - e1
+    return D if D > 0.0 else 0.0
+
+
 @njit(**JIT)
 def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
     """Advance one control tick of n_sub sub-steps with piecewise-constant inputs.
@@ -982,6 +1114,8 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
         muEG = mu * EG
     a = math.sqrt(R * d) if d > 0.0 else 0.0
     inv_au = _inv_speed(u)
+    # (patch travel per sub-step / contact radius)^2, for the runner step's blend (``_blend``)
+    tr2 = (u * dt / a) * (u * dt / a) if a > 0.0 else 0.0
     slip_tick = _set_radius(W, st, p, a, d, mu, ledger)
     s0 = u - v
     F = 0.0
@@ -1045,8 +1179,15 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
             i = _edge(k, j0, j1)
             xL = x_lo + i * dx
             xR = xL + dx
-            if a > 0.0 and ledger is None:
+            if a > 0.0 and ledger is None and mu is None:
                 Ai, Bi = _walk_content(U[i], xL, xR, c0, a, u, inv_au, dt)
+            elif a > 0.0 and ledger is None:
+                # with friction what an edge cell releases is wear (``_edge_dissipation``):
+                # its start content and the integral of its content
+                Ai, Bi, IA, IB, _e0, _e1, _e2 = _walk(U[i], xL, xR, c0, a, u, inv_au, dt)
+                L[L_U0, i] = U[i]
+                L[L_IA, i] = IA
+                L[L_IB, i] = IB
             elif a > 0.0:
                 Ai, Bi, IA, IB, e0, e1, e2 = _walk(U[i], xL, xR, c0, a, u, inv_au, dt)
                 SIA += IA
@@ -1073,25 +1214,58 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                 # friction limit at the end of the sub-step and the limit per unit overlap
                 # (the commit's slip work: the slid distance is the excess over the overlap)
                 Li, q = _edge_limit(xL, xR, c1, a, d, inv3R, muEG)
-                L[L_QLIM, i] = q
+                # the slip work's limit per unit overlap: the mean of the sub-step's two ends
+                L[L_QLIM, i] = 0.5 * (q + _edge_limit(xL, xR, c0, a, d, inv3R, muEG)[1])
                 L[0, i] = Li
                 if mass is not None:
                     Ut, dU = _clip_slope(Ai + Bi * sv0, Li, Bi)
                     Tt0 += Ut
                     dT0 += dU
-        # ---------------------------------------------------------------- runner velocity
+        # ---------------------------------------------------------------- runner
+        # vb: the runner's mean velocity over the sub-step (its displacement / dt), which the
+        # cells' creep takes (s = s0 - vb); v1: its velocity at the end.  A free runner
+        # (mass > 0) on the piece of the contact's force law active at v0 is a linear
+        # oscillator forced by a ramp, propagated exactly (``_runner_linear``); with friction
+        # a step that crosses a kink of the force law solves g(vb) = mass (vb - vref) -
+        # h (T(s0 - vb) + Fs) = 0 (monotone), exact on the piece and a trapezoid in the
+        # force beyond it (``_solve_bracketed`` with h = dt/2)
         fast = True
+        vref = v0
+        Fs = F
+        h = dt
+        vb = v0
+        v1l = v0
+        lam = 1.0
         if mass is None:
+            vb = vs_presc
             v1 = vs_presc
         elif mu is None:
-            den = mass + dt * SB
-            if den > 0.0:
-                v1 = (mass * v0 + dt * (SA + s0 * SB + F)) / den
+            if mass > 0.0:
+                # exact; blended into backward Euler where the runner's period on the contact
+                # is not resolved (``_blend``)
+                lam = _blend(SB * dt / mass, tr2)
+                if lam == 0.0:
+                    vb = (mass * v0 + dt * (SA + s0 * SB + F)) / (mass + dt * SB)
+                    v1 = vb
+                else:
+                    vb, v1, f1 = _runner_linear(mass, SB / dt, T1, SA + SB * s0, F, v0, dt)
+                if 0.0 < lam < 1.0:
+                    # the blended equation of the finite-friction step below, on a linear
+                    # force law (so that friction that never acts gives the same runner)
+                    vref = lam * vb + (1.0 - lam) * v0
+                    h = (1.0 - 0.5 * lam) * dt
+                    v1l = v1
+                    vb = (mass * vref + h * (SA + SB * s0 + F - lam * f1)) / (mass + h * SB)
+                    v1 = lam * (v1l + (dt / h) * (vb - vref)) + (1.0 - lam) * vb
+            elif SB > 0.0:
+                vb = (SA + s0 * SB + F) / SB  # massless: T + F = 0 at the end
+                v1 = vb
             else:
                 # massless runner without contact: with no load any v* balances; take the
                 # limit of a vanishing contact, no creep (as the finite-friction solver does).
                 # A load has no equilibrium here: flag it (the wrapper raises)
-                v1 = s0
+                vb = s0
+                v1 = vb
                 if load is not None and F != 0.0:
                     st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_SLIDE
         else:
@@ -1100,41 +1274,78 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                 if SL <= abs(F) and (SL > 0.0 or F != 0.0):
                     st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_SLIDE
             iters += 1.0
-            g0 = -dt * (Tt0 + F)
-            gp = mass + dt * dT0
-            v1 = v0
-            if gp <= 0.0:
-                # massless runner with every cell saturated (or no contact): g has no slope at
-                # v0; the bracketed solver picks the root (for no contact: the sphere's creep
-                # velocity, the limit of a vanishing contact)
-                fast = False
-                st[ST_ITER] = iters
-                B[j0:j1 + 1] = dxdt
-                v1 = _solve_bracketed(A, B, L, i0, i1, s0, v0, v0, mass, F, dt, st)
-                iters = st[ST_ITER]
-            elif g0 != 0.0:
-                v1 = v0 - g0 / gp  # root of the linear piece active at v0
+            if mass > 0.0:
+                # the piece at v0: T = Tt0 + dT0 (v0 - vb), stiffness dT0 / dt
+                lam = _blend(SB * dt / mass, tr2)
+                f1 = 0.0
+                if lam > 0.0:
+                    vref, v1l, f1 = _runner_linear(mass, dT0 / dt, T1, Tt0 + dT0 * v0, F, v0,
+                                                   dt)
+                # exact on the piece, the force beyond it a trapezoid over the sub-step (h =
+                # dt / 2), where the runner's period on the stuck contact is resolved; where
+                # it is not (th2 = (omega_n dt)^2 large) blended into backward Euler (vref =
+                # v0, h = dt, v1 = vb), which damps the unresolved ringing that crossing the
+                # force law's kinks excites instead of pumping it, and tends to the massless
+                # runner as the mass vanishes (``_blend``)
+                vref = lam * vref + (1.0 - lam) * v0
+                Fs = F - lam * f1
+                h = (1.0 - 0.5 * lam) * dt
+                vb = vref  # the root if the step stays on that piece (the commit checks)
+            else:
+                h = 0.5 * dt
+                g0 = -h * (Tt0 + F)
+                gp = h * dT0
+                if gp <= 0.0:
+                    # massless runner with every cell saturated (or no contact): g has no
+                    # slope at v0; the bracketed solver picks the root (for no contact: the
+                    # sphere's creep velocity, the limit of a vanishing contact)
+                    fast = False
+                    st[ST_ITER] = iters
+                    B[j0:j1 + 1] = dxdt
+                    vb = _solve_bracketed(A, B, L, i0, i1, s0, v0, v0, mass, F, h, st)
+                    iters = st[ST_ITER]
+                elif g0 != 0.0:
+                    vb = v0 - g0 / gp  # root of the linear piece active at v0
+        if not abs(dt * SB) < np.inf:
+            # the contact's stiffness times the step overflows: the runner step cannot be
+            # formed (it would take a finite force for none); reported as non-finite
+            st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_NONFINITE
         # ---------------------------------------------------------------- commit
+        drift = (0.0, 0.0)
+        if mu is not None:
+            drift = _limit_drift(x_lo, dx, c0, c1, muEG, inv3R)
         for attempt in range(2):
-            s = s0 - v1
-            rel = 0.0
+            s = s0 - vb
             # branch-free (a cell beyond its limit slides to it, adding the slip work; the
             # others add exactly 0 to it): the env with friction commits every cell in one
             # loop (inner cells: B = dx dt and overlap dx; edge cells: the B and the limit per
             # unit overlap of the build pass); otherwise the inner cells, then the edge cells
-            # one by one (with the ledger: their released energy)
+            # one by one
             edge_cells = _edges(i0, i1, j0, j1)
             dimp = 0.0
             clipped = False
             T1_in = 0.0  # with the ledger and friction: T of the inner cells at the end
             if ledger is None and mu is not None:
                 T1, Ta, slip, _ns, _nk, _nh = _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu,
-                                                      mass, True, None)
+                                                      mass, True, None, drift)
                 edge_cells = _cells(0, 0)  # committed too: none left for the scalar loop
+                if a > 0.0 and u != 0.0:
+                    # the trailing edge cells' slip work is their dissipation
+                    # (``_edge_dissipation``)
+                    for k in _edges(i0, i1, j0, j1):
+                        i = _edge(k, j0, j1)
+                        if not _trailing(i, j0, u):
+                            continue
+                        xL = x_lo + i * dx
+                        Ut0 = A[i] + B[i] * s
+                        Li = L[L_LIMIT, i]
+                        _u, work, _o = _slide(Ut0, Li, L[L_QLIM, i])
+                        slip += _edge_dissipation(L[L_U0, i], Ut0, U[i], Li,
+                                                  L[L_IA, i] + L[L_IB, i] * s, s, xL, xL + dx,
+                                                  c0, c1, u, dt, a, d, inv3R, muEG) - work
             elif ledger is not None and mu is not None:
                 T1, Ta, slip, n_slid, n_kinks, n_held = _commit(
-                    W, j0, j1, j0, j1, dxdt, s, inv_dx, mu, mass, None,
-                    _limit_drift(x_lo, dx, c0, c1, muEG, inv3R))
+                    W, j0, j1, j0, j1, dxdt, s, inv_dx, mu, mass, None, True, drift)
                 clipped = n_slid > 0
                 if n_kinks > 0:
                     dimp, n_bent = _impulse_fix(W, j0, j1, x_lo, dx, c0, muEG, d, inv3R,
@@ -1146,57 +1357,46 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                 T1_in = T1
             else:
                 T1, Ta, slip, _ns, _nk, _nh = _commit(W, j0, j1, j0, j1, dxdt, s, inv_dx, mu,
-                                                      mass, None, None)
+                                                      mass, None, None, drift)
             for k in edge_cells:
                 i = _edge(k, j0, j1)
                 Ut = A[i] + B[i] * s
                 if mu is not None:
-                    Li = L[0, i]
-                    # (the ledger test prunes this from the kernel without the ledger, where
-                    # _commit took the edge cells)
-                    if ledger is not None and a > 0.0:
-                        # the deflection an edge cell released this sub-step, from the creep
-                        # integral, can be no larger than the friction limit allows (the
-                        # released material is at the limit once the cell slides)
-                        ei = L[L_E0, i] + s * (L[L_E1, i] + s * L[L_E2, i])
-                        if abs(Ut) > Li and Ut != 0.0:
-                            ei *= (Li / Ut) * (Li / Ut)
-                        elif Li == 0.0 and ei > 0.0:
-                            # a cell that left the contact entirely (Ut = Li = 0) released no
-                            # more than it could hold where the contact centre came closest
-                            # to it in the sub-step (limit and overlap both peak there): bounds
-                            # its unclipped creep integral.  For a cell on the trailing half
-                            # (the usual case: the patch moves less than a per sub-step) that
-                            # point is c0.
-                            xL = x_lo + i * dx
-                            cn = min(max(xL + 0.5 * dx, min(c0, c1)), max(c0, c1))
-                            ln = _overlap(xL, xL + dx, cn, a)
-                            if ln > 0.0:
-                                Ln = muEG * _normal_content(xL, xL + dx, cn, a, d, inv3R)
-                                ei = min(ei, 0.5 * Ln * Ln / ln)
-                        rel += ei
-                    Ut, work, over = _slide(Ut, Li, L[L_QLIM, i])
+                    Ut0 = Ut
+                    Ut, work, over = _slide(Ut, L[0, i], L[L_QLIM, i])
                     clipped |= over
-                    slip += work
+                    if a > 0.0 and u != 0.0 and _trailing(i, j0, u):
+                        xL = x_lo + i * dx
+                        slip += _edge_dissipation(L[L_U0, i], Ut0, Ut, L[L_LIMIT, i],
+                                                  L[L_IA, i] + L[L_IB, i] * s, s, xL, xL + dx,
+                                                  c0, c1, u, dt, a, d, inv3R, muEG)
+                    else:
+                        slip += work
                     if mass is not None:
                         Ta += abs(Ut)
                 U[i] = Ut
                 T1 += Ut
             if mu is None or mass is None or not fast:
                 break
-            # verify the one-step root: g(v1) vanishes unless the step crossed a kink
+            # verify the one-step root: g(vb) vanishes unless the step crossed a kink
             iters += 1.0
-            g1 = mass * (v1 - v0) - dt * (T1 + F)
-            if _converged(g1, mass, v1, v0, dt, Ta, F):
+            g1 = mass * (vb - vref) - h * (T1 + Fs)
+            if _converged(g1, mass, vb, vref, h, Ta, Fs):
                 break
             fast = False
             st[ST_ITER] = iters
             B[j0:j1 + 1] = dxdt
-            v1 = _solve_bracketed(A, B, L, i0, i1, s0, v0, v1, mass, F, dt, st)
+            vb = _solve_runner(A, B, L, i0, i1, s0, vref, vb, mass, Fs, h, st)
             iters = st[ST_ITER]
+        if mu is not None and mass is not None:
+            # end velocity: the piece's exact one, plus the momentum of the force beyond it
+            # (blended with backward Euler's, the mean); a massless runner's is its mean
+            v1 = vb
+            if mass > 0.0:
+                v1 = lam * (v1l + (dt / h) * (vb - vref)) + (1.0 - lam) * vb
         if last and mu is not None:
             stuck = _stuck_length(W, i0, i1, j0, j1, x_lo, dx, c1, a)
-        xs += v1 * dt
+        xs += vb * dt  # the displacement: the integral of v* over the sub-step
         xsph += v * dt
         slip_acc += slip
         if ledger is not None:
@@ -1220,15 +1420,22 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                 imp = (0.5 * (SU + T1_in) + dimp) * dt + imp_edge
             else:
                 imp = SIA + SIB * s  # no slip: exact integral of T over the sub-step
+            work_r = vb * imp
+            if mass is not None and mass > 0.0:
+                # a free runner's impulse and work from its own equation (exact on the
+                # force law's linear piece, where the cells' integrals assume a constant
+                # creep rate over the sub-step), as far as the step is the exact one (lam;
+                # backward Euler's runner sees the cells' constant creep rate)
+                imp = lam * (mass * (v1 - v0) - F * dt) + (1.0 - lam) * imp
+                work_r = (lam * (0.5 * mass * (v1 - v0) * (v1 + v0) - F * vb * dt)
+                          + (1.0 - lam) * work_r)
             st[ST_IMP] += imp
             if mu is None:
                 st[ST_REL] += E0 + s * (E1 + s * E2)
-            else:
-                st[ST_REL] += rel
             st[ST_DRIVE] += s0 * imp
-            st[ST_RUNNER] += v1 * imp
+            st[ST_RUNNER] += work_r
             if load is not None:
-                st[ST_EXT] += load * v1 * dt
+                st[ST_EXT] += load * vb * dt
             imp_tick += imp
         time += dt
         slip_tick += slip

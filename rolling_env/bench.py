@@ -120,7 +120,7 @@ def _core_pass(core, ticks, seed=0, threads=None):
             dt = time.perf_counter() - t
         finally:
             numba.set_num_threads(before)
-        return ticks * core.num_envs / dt, cells * sc.sub_steps / dt
+        return ticks * core.num_envs / dt, cells * sc.n_sub / dt
     return run_pass
 
 

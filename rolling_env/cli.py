@@ -15,7 +15,8 @@ import sys
 
 from .io import check_writable, interrupt_ends_process
 
-COMMAND_MODULES = ["physics", "figures", "converge", "stability", "bench", "rollout"]
+COMMAND_MODULES = ["physics", "figures", "converge", "stability", "bench", "rollout",
+                   "accuracy"]
 
 
 def checked_float(name, check):

@@ -30,7 +30,9 @@ class RollingDriveEnv(gym.Env):
     larger force in the *forth* step than in the *back* step, the tangential creep acts on
     different contact areas and the runner creeps (Wetter & Popov 2015).  The contact is the
     MDR spring row of ``rolling_env.model`` with finite Coulomb friction (slip = wear) and
-    finite runner inertia, advanced ``sub_steps`` times per control tick.  The task: move the
+    finite runner inertia, advanced ``n_sub`` sub-steps per control tick (the scene's
+    ``sub_steps``, or with ``sub_steps: auto`` as many as its ``accuracy`` asks for,
+    ``Scene.n_sub``; docs/numerics.md).  The task: move the
     runner to a target displacement, with little slip work (wear).
 
     Everything physical is fixed by a *scene* (``configs/scenes/*.yaml``): see
@@ -102,11 +104,21 @@ class RollingDriveEnv(gym.Env):
     ``gym.make("RollingDrive-v0", scene="default", render_mode=None, **overrides)``: ``scene``
     is a shipped scene name (``rolling_env.list_scenes()``), a path to a YAML file, a dict or a
     ``Scene``; ``overrides`` replace scene keys (``mu=0.1``, ``runner_mass=0.01``, ...) with the
-    same validation.  ``render_mode`` is ``"rgb_array"`` (a uint8 frame of the contact and the
+    same validation; ``sub_steps=n`` and ``resolution=r`` override the numerics (``accuracy=``
+    re-chooses "auto" sub-steps).  ``render_mode`` is ``"rgb_array"`` (a uint8 frame of the contact and the
     runner against its target) or ``"human"`` (the same frame in a matplotlib window).
 
     ## Version History
     * v0: initial version.
+    * v0, converged physics (same id, action mapping, observations, reward definition and
+      scene physics; different transitions): the runner step is exact on the stuck contact
+      (it was backward Euler, which damped the runner's ringing numerically); the wear term
+      counts the elastic energy the material carries out at the trailing edge, where finite
+      friction makes it slide to zero (it was released uncounted, so the wear was up to 2x
+      low on coarse grids) and charges a sliding cell the mean of its friction limit over the
+      sub-step; the shipped scenes take ``sub_steps: auto`` (from ``accuracy``) and 32 cells
+      per contact radius on ``loaded``, ``resonant`` and ``light_stiff``.  Agents trained on
+      the earlier transitions are evaluated as they are (results/comparison.md says so).
     """
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 30}

@@ -36,7 +36,8 @@ def check_flags(st) -> None:
         raise RuntimeError("the contact left the spring row: the rolling stroke exceeded the "
                            "grid built for it (enlarge `stroke`)")
     if flags & K.FLAG_NONFINITE:
-        raise FloatingPointError("the kernel produced a non-finite value")
+        raise FloatingPointError("the kernel produced a non-finite value (it overflowed the "
+                                 "float range: reduce dt_tick, the rates or the load)")
 
 
 @dataclass(frozen=True)

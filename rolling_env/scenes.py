@@ -23,6 +23,7 @@ from .validation import check_range
 
 SCENE_DIR = Path(__file__).resolve().parent.parent / "configs" / "scenes"
 _INF = math.inf
+DEFAULT_ACCURACY = 0.01  # a scene's ``accuracy`` where its file leaves it out
 
 
 @dataclass(frozen=True)
@@ -48,7 +49,7 @@ class Scene:
     # numerics and timing
     period: float            # nominal excitation period tau [s] (time scale of the task)
     ticks_per_period: int    # control ticks per nominal period
-    sub_steps: int           # physics sub-steps per control tick
+    sub_steps: int | str     # physics sub-steps per control tick, or "auto" (``n_sub``)
     resolution: float        # cells per contact radius at N_max
     # task
     episode_steps: int       # control ticks per episode (the env truncates there)
@@ -58,17 +59,34 @@ class Scene:
     tolerance: float         # |error| counted as "at the target" [m]
     w_track: float           # weight of the tracking term (per tick, on |error|/target_max)
     w_wear: float            # weight of the wear term (per tick, on slip work / wear_ref)
+    accuracy: float = DEFAULT_ACCURACY  # relative error "auto" sub-steps aim at [-]
 
     @property
     def dt(self) -> float:
         """Control tick [s]."""
         return self.period / self.ticks_per_period
 
+    @property
+    def n_sub(self) -> int:
+        """Sub-steps per tick: ``sub_steps`` where it is a number, else ``auto_sub_steps``."""
+        return self.sub_steps if isinstance(self.sub_steps, int) else auto_sub_steps(self)
+
     def replace(self, **overrides) -> "Scene":
         return validate(dataclasses.replace(self, **_coerce_all(overrides)))
 
 
 EPISODE_STEPS_MAX = 10**8
+# "auto" sub-steps (``auto_sub_steps``), measured on the shipped scenes' episodes against
+# runs refined in the sub-step (docs/numerics.md): the episode's slip work is off by about
+# C_TRAVEL x (cells the patch crosses per sub-step)^2 with finite friction (1.1-1.7% at one
+# cell: the trailing edge cells), the runner displacement by about C_TRAVEL_STICK x that
+# with infinite friction, and a light runner's displacement by about C_RUNNER x
+# (omega_n dt)^2 (omega_n on the stuck contact at N_max)
+C_TRAVEL = 0.02
+C_TRAVEL_STICK = 0.002
+C_RUNNER = 0.05
+AUTO_SUB_STEPS_MAX = 4096
+
 _SPEC = {  # key: (type, lo, hi, lo_open, allow_inf); physical ranges, wide but bounded so
     # that every derived scale (contact radius, forces, masses, rates in kernel units) stays
     # a normal float: a scene either builds or is rejected here, never NaN or a crash later
@@ -95,7 +113,9 @@ _SPEC = {  # key: (type, lo, hi, lo_open, allow_inf); physical ranges, wide but 
     "tolerance": (float, 1e-15, 1.0, False, False),
     "w_track": (float, 0.0, 1e6, False, False),
     "w_wear": (float, 0.0, 1e12, False, False),
+    "accuracy": (float, 1e-6, 0.5, False, False),
 }
+_OPTIONAL = {"accuracy"}  # keys a scene file may leave out (their defaults above)
 E_OVER_G_RANGE = (0.01, 100.0)  # E*/G*: about 1-2 for real materials (isotropic, 0 <= nu <= 0.5)
 
 _FIELDS = [f.name for f in dataclasses.fields(Scene)]
@@ -113,6 +133,17 @@ def _coerce(key, value):
         return value
     if key not in _SPEC:
         raise ValueError(f"unknown scene key '{key}'; allowed keys: {', '.join(_FIELDS)}")
+    if key == "sub_steps":
+        if isinstance(value, str) and value.strip().lower() == "auto":
+            return "auto"
+        try:
+            return _coerce_number(key, value)
+        except ValueError as e:
+            raise ValueError(f"{e} (or 'auto': chosen from the scene's accuracy)") from None
+    return _coerce_number(key, value)
+
+
+def _coerce_number(key, value):
     typ, lo, hi, lo_open, allow_inf = _SPEC[key]
     if typ is bool:
         if not isinstance(value, (bool, np.bool_)):
@@ -142,6 +173,34 @@ def _coerce(key, value):
             raise ValueError(f"scene key '{key}' must be an integer in [{lo}, {hi}], got {value}")
     x = check_range(f"scene key '{key}'", value, lo, hi, lo_open=lo_open, allow_inf=allow_inf)
     return typ(x) if typ is int else x
+
+
+def contact_radius_max(s: "Scene") -> float:
+    """Hertz contact radius at N_max [m]."""
+    return math.sqrt(s.R * (3 * s.N_max / (4 * s.E_star * math.sqrt(s.R))) ** (2 / 3))
+
+
+def auto_sub_steps(s: "Scene") -> int:
+    """Sub-steps per tick for a relative error of about ``accuracy`` in the episode's slip
+    work and runner displacement, from the two things the step must resolve (both second
+    order in it; constants measured, module header):
+
+    * the patch travel: ``omega_R_max dt / dx`` cells per tick at full rolling speed, each
+      sub-step crossing at most sqrt(accuracy / C_TRAVEL) cells (finite friction; the slip
+      work's trailing edge) or sqrt(accuracy / C_TRAVEL_STICK) (infinite friction);
+    * a free runner's ringing on the stuck contact: ``omega_n dt`` radians per tick with
+      omega_n = sqrt(2 a_max G* / m), each sub-step at most sqrt(accuracy / C_RUNNER) rad.
+      A heavy runner needs few, a light one many; a massless or prescribed one none.
+
+    At least 1, at most ``AUTO_SUB_STEPS_MAX``."""
+    a_max = contact_radius_max(s)
+    cells = s.omega_R_max * s.dt / (a_max / s.resolution)
+    c_travel = C_TRAVEL if math.isfinite(s.mu) else C_TRAVEL_STICK
+    n = cells * math.sqrt(c_travel / s.accuracy)
+    if 0.0 < s.runner_mass:
+        omega_n = math.sqrt(2.0 * a_max * s.G_star / s.runner_mass)
+        n = max(n, omega_n * s.dt * math.sqrt(C_RUNNER / s.accuracy))
+    return int(min(max(math.ceil(n - 1e-9), 1), AUTO_SUB_STEPS_MAX))
 
 
 def _coerce_all(d: dict) -> dict:
@@ -205,7 +264,7 @@ def load_scene(scene: str | os.PathLike | dict | Scene = "default", **overrides)
             raise ValueError(f"scene file {str(path)!r} must hold a mapping of keys to values")
         raw.setdefault("name", path.stem)
         src = str(path)
-    missing = [k for k in _FIELDS if k not in raw]
+    missing = [k for k in _FIELDS if k not in raw and k not in _OPTIONAL]
     if missing:
         raise ValueError(f"scene {src} is missing key(s): {', '.join(missing)}")
     vals = _coerce_all(raw)

@@ -1,12 +1,13 @@
 """Record env trajectories as a regression reference for tests/test_kernel_paths.py.
 
-    python tests/make_golden.py tests/data/golden_3ab498b.npz
+    python tests/make_golden.py tests/data/golden_env.npz
 
-The committed file was recorded with commit 3ab498b (the kernel before the 2026-11-24 speed-ups:
-reference counting on, the edge cells walked piece by piece with the ledger off too, sin/cos of
-the observation clock, pow for the Hertz indentation), checked out in a git worktree and run as
-``PYTHONPATH=<worktree> NUMBA_CACHE_DIR=<empty dir> python tests/make_golden.py OUT``.  Later
-kernels must reproduce it to round-off.
+The committed file holds the transitions of the env as it is now (the exact runner step on
+the stuck contact, the trailing edge's dissipation in the wear, sub-steps chosen from each
+scene's accuracy).  It guards against unintended change, not against error: the physics
+tests check every reported quantity from its definition.  Record it again, with a fresh
+``NUMBA_CACHE_DIR``, only for a change of the transitions that is meant, and say why in the
+commit.
 """
 from __future__ import annotations
 

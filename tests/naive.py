@@ -109,11 +109,20 @@ def naive_run(*, R, E_star, G_star, mu, m, F_ext, x_lo, x_hi, dx,
             gone = ~contact
             release_w += 0.5 * kT * np.sum(uT[gone] ** 2)
             uT[gone] = 0.0
+            T_old = kT * np.sum(uT)  # the force at the start of the sub-step
             # 3. trial deflection as a function of the new runner velocity, then Coulomb
             lim = np.where(contact, mu * (E_star / G_star) * uN, 0.0) if mu < np.inf else None
 
+            # the runner's displacement over the sub-step: the trapezoid of its velocities
+            # for a free runner (implicit trapezoid rule, second order), its new velocity
+            # for a prescribed or massless one
+            vs_old = vs if 0 < m < np.inf else None
+
+            def mean_v(vs_new):
+                return vs_new if vs_old is None else 0.5 * (vs_old + vs_new)
+
             def trial(vs_new):
-                u_tr = np.where(contact, uT + (wR - v_k - vs_new) * dt, 0.0)
+                u_tr = np.where(contact, uT + (wR - v_k - mean_v(vs_new)) * dt, 0.0)
                 u_cl = u_tr if lim is None else np.clip(u_tr, -lim, lim)
                 return u_tr, u_cl, kT * np.sum(u_cl)
 
@@ -123,13 +132,16 @@ def naive_run(*, R, E_star, G_star, mu, m, F_ext, x_lo, x_hi, dx,
             elif lim is None:                                 # T affine: T0 - K dt vs_new
                 T0 = kT * np.sum(np.where(contact, uT + (wR - v_k) * dt, 0.0))
                 K = kT * n_c
-                if m > 0:
-                    vs_new = (m * vs + dt * (T0 + F_k)) / (m + K * dt * dt)
+                if m > 0:  # m (v1 - v0) = dt/2 (T_old + T1) + dt F, T1 = T0 - K dt (v0 + v1)/2
+                    a_ = 0.5 * K * dt * dt
+                    vs_new = (m * vs + 0.5 * dt * (T_old + T0 - 0.5 * K * dt * vs) + dt * F_k
+                              ) / (m + 0.5 * a_)
                 else:
                     vs_new = T0 / (K * dt) if n_c > 0 else 0.0
             elif m > 0:                                       # dynamics, finite friction
                 T_max = np.sum(mu * kN * np.where(contact, uN, 0.0))
-                vs_new = _bisect(lambda s: m * (s - vs) - dt * (trial(s)[2] + F_k),
+                vs_new = _bisect(lambda s: m * (s - vs) - 0.5 * dt * (T_old + trial(s)[2])
+                                 - dt * F_k,
                                  vs + dt * (F_k - T_max) / m, vs + dt * (F_k + T_max) / m)
             elif n_c == 0:                                    # massless, nothing to hold it
                 vs_new = 0.0
@@ -143,11 +155,14 @@ def naive_run(*, R, E_star, G_star, mu, m, F_ext, x_lo, x_hi, dx,
             if lim is not None:
                 slip_w += np.sum(mu * kN * np.where(contact, uN, 0.0) * np.abs(u_tr - u_cl))
             uT = u_cl
+            vm = mean_v(vs_new)
             vs = float(vs_new)
-            xs += vs * dt
-            impulse += T * dt
-            drive_w += T * (wR - v_k) * dt
-            runner_w += T * vs * dt
+            xs += vm * dt
+            T_mean = T if vs_old is None else 0.5 * (T_old + T)
+            impulse += T_mean * dt
+            drive_w += T_mean * (wR - v_k) * dt
+            runner_w += T_mean * vm * dt
+            T_old = T
         out["T"][k], out["impulse"][k] = T, impulse
         out["N"][k] = kN * np.sum(np.where(contact, uN, 0.0))
         out["vstar"][k], out["xstar"][k], out["c"][k] = vs, xs, c

@@ -126,18 +126,23 @@ def test_closed_form_edge_cell_below_the_rounding_step_stays_finite():
     assert K._walk_content(*args) == (0.0, 0.0) == K._walk(*args)[:2]
 
 
+DRIFT = (0.05, 0.01)  # the inner cells' start limits: end limit - (0.05 + 0.01 i)
+
+
 def _commit_reference(W, i0, i1, j0, j1, dxdt, s, inv_dx, mass):
     """Plain-Python commit of cells i0..i1 (finite friction): inner cells j0..j1 with B = dx dt
     and overlap dx, edge cells with the build pass's B and limit per unit overlap q; a content
-    beyond its limit slides to it (slip work (|U| - L) L / overlap, none for a cell out of
-    contact)."""
+    beyond its limit slides to it (slip work (|U| - L) q, none for a cell out of contact; q:
+    an inner cell's mean of its start and end limits over dx, the start limit being its end
+    limit less ``DRIFT``)."""
     W = W.copy()
     T1 = Ta = slip = 0.0
     for i in range(i0, i1 + 1):
         inner = j0 <= i <= j1
         Bi = dxdt if inner else W[K.W_B, i]
         Li = W[K.W_L + K.L_LIMIT, i]
-        q = Li * inv_dx if inner else W[K.W_L + K.L_QLIM, i]
+        q = ((Li - 0.5 * (DRIFT[0] + DRIFT[1] * i)) * inv_dx if inner
+             else W[K.W_L + K.L_QLIM, i])
         Ut = W[K.W_A, i] + Bi * s
         if abs(Ut) > Li:
             slip += (abs(Ut) - Li) * q
@@ -175,7 +180,7 @@ def test_commit_of_every_cell_matches_a_plain_reference(i0, i1, j0, j1, mass):
     W[K.W_B, 7] = 0.5
     dxdt, s, inv_dx = 0.4, 1.7, 2.0
     want_W, want = _commit_reference(W, i0, i1, j0, j1, dxdt, s, inv_dx, mass)
-    got = K._commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, 0.2, mass, True, None)
+    got = K._commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, 0.2, mass, True, None, DRIFT)
     np.testing.assert_array_equal(W[K.W_U], want_W[K.W_U],
                                   err_msg="committed contents differ from the plain loop")
     np.testing.assert_array_equal(W[1:], want_W[1:], err_msg="commit changed a row it only reads")
@@ -208,7 +213,7 @@ def test_commit_keeps_a_nan_content(edges, where):
     W[K.W_A, where] = np.nan
     j0, j1 = (3, 8) if edges else (0, n - 1)
     T1, Ta, _slip, _ns, _nk, _nh = K._commit(W, 0, n - 1, j0, j1, 0.4, 0.3, 2.0, 0.2, 1.0,
-                                             edges, None)
+                                             edges, None, DRIFT)
     assert math.isnan(W[K.W_U, where]), f"cell {where} committed {W[K.W_U, where]}, not NaN"
     assert math.isnan(T1) and math.isnan(Ta), f"T1 = {T1}, Ta = {Ta}: the NaN was lost"
     others = np.delete(W[K.W_U], where)
@@ -262,15 +267,15 @@ def test_commit_census_counts_the_cells_that_slid_and_those_whose_path_bends():
         slid, bends, held)
     # several cells in one call (one creep): every cell of both signs, the packed count
     Wn = W.copy()
-    got = K._commit(Wn, 0, n - 1, 0, n - 1, dxdt, 3.0, 2.0, 0.2, None, None, (0.05, 0.01))
+    got = K._commit(Wn, 0, n - 1, 0, n - 1, dxdt, 3.0, 2.0, 0.2, None, None, True, DRIFT)
     bn = W[K.W_A] + dxdt * 3.0
     sl = np.abs(bn) > L1
     assert got[3] == sl.sum() and got[5] == np.sign(bn[sl]).sum(), (got[3:], sl)
     for i in range(n):  # one cell at a time, each with its own creep s
         Wi = W.copy()
-        got = K._commit(Wi, i, i, i, i, dxdt, s[i], 2.0, 0.2, None, None, (0.05, 0.01))
+        got = K._commit(Wi, i, i, i, i, dxdt, s[i], 2.0, 0.2, None, None, True, DRIFT)
         Wr = W.copy()
-        plain = K._commit(Wr, i, i, i, i, dxdt, s[i], 2.0, 0.2, None, None, None)
+        plain = K._commit(Wr, i, i, i, i, dxdt, s[i], 2.0, 0.2, None, None, None, DRIFT)
         assert got[:3] == plain[:3], f"cell {i}: the census changed the commit"
         np.testing.assert_array_equal(Wi, Wr, err_msg=f"cell {i}: the census changed a row")
         want = (int(slid[i]), int(bends[i]), float(np.sign(b[i])) if slid[i] else 0.0)
@@ -668,15 +673,14 @@ def test_inner_cells_are_never_outside_and_exact_but_within_the_margin(x_lo, n):
     assert n_near > 100, f"{n_near} ends within the margin: the test no longer probes it"
 
 
-GOLDEN = Path(__file__).parent / "data" / "golden_3ab498b.npz"
+GOLDEN = Path(__file__).parent / "data" / "golden_env.npz"
 
 
 @pytest.mark.parametrize("scene", rolling_env.list_scenes())
-def test_env_reproduces_the_kernel_before_the_speed_ups(scene):
-    """128 seeded random steps of every shipped scene against the trajectory recorded with
-    commit 3ab498b (tests/make_golden.py: the kernel before the 2026-11-24 speed-ups, whose
-    changes are all meant to be round-off): observations to 2e-6 (float32), rewards and every
-    info value to 1e-10 of their largest magnitude."""
+def test_env_reproduces_its_recorded_transitions(scene):
+    """128 seeded random steps of every shipped scene against the recorded trajectory
+    (tests/make_golden.py; a speed-up must change it by round-off only): observations to 2e-6
+    (float32), rewards and every info value to 1e-10 of their largest magnitude."""
     import make_golden
     ref = np.load(GOLDEN)
     new = make_golden.record(scene)
@@ -693,13 +697,13 @@ def test_env_reproduces_the_kernel_before_the_speed_ups(scene):
             assert err <= 1e-10, f"{scene}/{k}: differs by {err:.1e} of its largest value"
 
 
-def test_env_drive_drops_the_ledger_rows_and_refuses_drive_run():
-    """The env kernel keeps no energy ledger, so an env's work array has no ledger rows
-    (``Drive(..., ledger=False)``, ``work_rows(finite_mu, ledger=False)``: three rows per
-    cell fewer with friction), in the single env and the batched one; ``Drive.run``, which
-    writes those rows, refuses such a drive by name, and ``run_ticks`` such a work array
-    (it would index rows the array lacks).  A drive pickled before the ledger had rows of its
-    own (a plain ``ledger`` attribute and the env's rows) loads with the rows it needs."""
+def test_env_drive_refuses_drive_run_and_old_pickles_load():
+    """The env kernel keeps no energy ledger: ``Drive.run``, which keeps it, refuses an env's
+    drive by name.  Its work array has the rows of the edge cells' dissipation (their start
+    content and content integral, the wear's trailing-edge term), the same rows as the
+    ledger's, in the single env and the batched one.  A drive pickled before the ledger had
+    rows of its own (a plain ``ledger`` attribute and fewer rows) loads with the rows it
+    needs."""
     import pickle
 
     import rolling_env
@@ -708,7 +712,7 @@ def test_env_drive_drops_the_ledger_rows_and_refuses_drive_run():
     env = rolling_env.make("default")
     drv = env.unwrapped.drive
     assert not drv.ledger
-    assert drv.cells.shape[0] == K.work_rows(True, False) == K.work_rows(True) - 3, drv.cells.shape
+    assert drv.cells.shape[0] == K.work_rows(True, False) == K.work_rows(True), drv.cells.shape
     core = BatchCore(2, "default")
     assert core.cells.shape[1] == K.work_rows(True, False), core.cells.shape
     env.reset(seed=0)
@@ -716,7 +720,7 @@ def test_env_drive_drops_the_ledger_rows_and_refuses_drive_run():
     assert np.any(drv.U != 0.0), "no contact after a step"
     with pytest.raises(RuntimeError, match="without the energy ledger"):
         drv.run(dt_tick=1e-6, n_sub=4, omega_R=[0.1], v=[0.1], N=[0.5])
-    W, st, p = drv.cells.copy(), drv.st.copy(), drv._p
+    W, st, p = drv.cells[:K.W_L + 5].copy(), drv.st.copy(), drv._p
     with pytest.raises(ValueError, match="lacks the energy ledger's rows"):  # not past the rows
         K.run_ticks(W, st, p, np.array([0.1]), np.array([0.1]), np.array([0.1]), np.zeros(1),
                     0.3, 1.0, None, 4, 0.01, np.zeros((1, K.N_OUT)))
@@ -725,8 +729,8 @@ def test_env_drive_drops_the_ledger_rows_and_refuses_drive_run():
     assert own.ledger and own.cells.shape[0] == K.work_rows(True)
     own.U[:] = np.linspace(0.0, 1.0, own.U.size)
     state = pickle.loads(pickle.dumps(own)).__dict__.copy()  # as pickled before: a plain
-    state["ledger"] = state.pop("_ledger")                  # attribute, the env's rows
-    state["cells"] = state["cells"][:K.work_rows(True, False)]
+    state["ledger"] = state.pop("_ledger")                  # attribute, fewer rows
+    state["cells"] = state["cells"][:K.W_L + 5]
     older = Drive.__new__(Drive)
     older.__setstate__(state)
     assert older.ledger and older.cells.shape[0] == K.work_rows(True), older.cells.shape

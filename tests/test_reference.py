@@ -68,19 +68,23 @@ def test_prescribed_runner_infinite_friction_random_inputs(seed):
 
 @pytest.mark.parametrize("seed,mu,m", [(3, 0.3, 1e-3), (4, 0.1, 1e-2), (5, math.inf, 1e-3)])
 def test_free_runner_random_inputs(seed, mu, m):
-    """Free runner with friction on random inputs: runner displacement within 3% of its
-    range and slip work within 5% of the naive row at 400 springs per radius (its own grid
-    error, measured above, dominates both)."""
+    """Free runner with friction on random inputs against the naive row (400 springs per
+    radius, its runner on the implicit trapezoid rule): runner displacement within 2% of its
+    range at 40 sub-steps per tick (measured 0.2-0.8%; 0.02-0.08% at 160), and slip work
+    within 3% of the naive row's first-order extrapolation from 40 and 80 sub-steps (its
+    slip work takes the friction limit at the end of each sub-step; measured 0.2-1.3%; 10-15%
+    apart at 40 sub-steps alone)."""
     d, u, v, dt = _random_ticks(seed)
     p = DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=m)
     a = _ours(p, d, u, v, dt, None)
     b = _naive(p, d, u, v, dt, None)
     rng_x = np.ptp(b["xstar"]) + 1e-30
     err = np.max(np.abs(a["xstar"] - b["xstar"])) / rng_x
-    assert err < 3e-2, f"x* mismatch {err:.3e} of its range (seed {seed}, mu {mu})"
+    assert err < 2e-2, f"x* mismatch {err:.3e} of its range (seed {seed}, mu {mu})"
     if math.isfinite(mu):
-        sa, sb = a["slip_work"].sum(), b["slip_work"][-1]
-        assert abs(sa - sb) < 5e-2 * sb, f"slip work {sa:.4e} vs naive {sb:.4e}"
+        b2 = _naive(p, d, u, v, dt, None, n_sub=80)
+        sa, sb = a["slip_work"].sum(), 2.0 * b2["slip_work"][-1] - b["slip_work"][-1]
+        assert abs(sa - sb) < 3e-2 * sb, f"slip work {sa:.4e} vs naive {sb:.4e}"
 
 
 def test_naive_row_converges_to_same_working_point():
