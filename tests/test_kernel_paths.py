@@ -767,3 +767,34 @@ def test_edge_impulse_of_a_cell_entering_stuck_that_starts_to_slide(over):
                           muEG)
     ref = _clipped_walk_integral(0.0, s, xL, xR, c0, u, dt, a, d, inv3R, muEG)
     assert abs(got - ref) <= 3e-4 * Li * dt, f"{(got - ref) / (Li * dt):.2e} of Li dt"
+
+
+@pytest.mark.parametrize("th2", [0.0, 1e-8, 1e-3, 0.1, 0.2999, 0.3, 1.0, 30.0, 1e6])
+def test_runner_step_functions_against_high_precision(th2):
+    """``_phis`` (cos th, sin th / th, (1 - cos th) / th^2, (th - sin th) / th^3; series below
+    th^2 = 0.3) against 40-digit arithmetic: 1e-14 relative (the limits at th = 0 exact)."""
+    mp = pytest.importorskip("mpmath")
+    mp.mp.dps = 40
+    got = K._phis(th2)
+    if th2 == 0.0:
+        want = [1, 1, mp.mpf(1) / 2, mp.mpf(1) / 6]
+    else:
+        t = mp.sqrt(th2)
+        want = [mp.cos(t), mp.sin(t) / t, (1 - mp.cos(t)) / t ** 2, (t - mp.sin(t)) / t ** 3]
+    for name, g, w in zip(("cos", "p1", "p2", "p3"), got, want):
+        assert abs(g - float(w)) <= 1e-14 * max(abs(float(w)), 1e-300) + 1e-300, (name, g, w)
+
+
+@pytest.mark.parametrize("k", [0.0, 0.3, 40.0])
+def test_runner_linear_solves_the_forced_oscillator(k):
+    """``_runner_linear``: m xi'' = T0 + (Tf1 - T0) t / dt - k xi + F, xi(0) = 0, xi'(0) = v0,
+    integrated by scipy (rtol 1e-12): mean velocity xi(dt)/dt, end velocity and end force
+    T + F to 1e-9 of their scales, from a free mass (k = 0) to 6 rad per step."""
+    from scipy.integrate import solve_ivp
+    m, T0, Tf1, F, v0, dt = 1.1, 0.7, -0.4, 0.25, 0.3, 1.0
+    sol = solve_ivp(lambda t, y: [y[1], (T0 + (Tf1 - T0) * t / dt - k * y[0] + F) / m],
+                    (0.0, dt), [0.0, v0], rtol=1e-12, atol=1e-14)
+    xi, v1 = sol.y[0, -1], sol.y[1, -1]
+    vb, v1k, f1 = K._runner_linear(m, k, T0, Tf1, F, v0, dt)
+    assert abs(vb - xi / dt) < 1e-9 and abs(v1k - v1) < 1e-9, (vb, xi / dt, v1k, v1)
+    assert abs(f1 - (Tf1 - k * xi + F)) < 1e-9, (f1, Tf1 - k * xi + F)
