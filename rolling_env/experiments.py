@@ -276,12 +276,15 @@ def simulate(delta, eps, w, omega_n_ratio, *, mu=math.inf, periods=40,
     load must stay within what the contact holds (|F_ext| <= mu N at the back-step force too),
     else the run raises ValueError (no force equilibrium).
 
-    With finite friction the default sub-steps (``default_substeps``) underestimate the slip
-    work where the trailing-edge slip zone, about |1 - eps - v*/(omega R)| (G*/E*) R / mu
-    wide, spans only a few sub-step travels (nearly stuck contacts, or very large mu): 40%
-    low at (0.7, 0.99999, 2.5, mu 0.3), 23% at (0.6, 0.3, 3, mu 1e4); pass ``n_sub`` so that
-    the patch travel per sub-step (w a1 / n_sub per half period) is below a twentieth of it
-    (README, "Finite friction, sub-steps").
+    Sub-steps: ``n_sub`` per tick, by default ``default_substeps`` (the mean velocity within
+    1% of its converged value, or 1e-3 x Eq. 32 where it is near zero, up to omega_n/Omega =
+    100; with finite friction the slip work within 0.5%: the patch moves 1/8 cell per
+    sub-step).  A coarser ``n_sub`` converges at second order: fewer than 64 sub-steps per
+    runner period 2 pi/omega_n can be off by more than 1% (2.7x the tolerance at 32 and r =
+    2), a patch travel above a1/4 per sub-step too (heavy runners), and with finite friction
+    steps above 1/8 cell overestimate the slip work where the trailing-edge slip zone, about
+    |1 - eps - v*/(omega R)| (G*/E*) R / mu wide, spans about one to a few cells (+1.3% at
+    1/4 cell, +7% at 1 cell; measured at eps 0.998 .. 0.99999, mu 0.3).
 
     Returns ``mean_v_star_over_omega_R`` (mean runner velocity over the second half of the
     periods, paper convention), ``slip_work`` (per period, in units of 2 G* a1^3),
@@ -291,9 +294,9 @@ def simulate(delta, eps, w, omega_n_ratio, *, mu=math.inf, periods=40,
     load the contact does not divide round-off by round-off),
     ``seconds``; with ``record`` also the per-tick trajectory.  ``step_converged``,
     ``runner_steps_per_period`` and ``step_note`` (``step_status``) say whether the runner
-    period got the sub-steps ``default_substeps`` asks for (not above omega_n/Omega = 10,
+    period got the sub-steps ``default_substeps`` asks for (not above omega_n/Omega = 100,
     where they are capped, nor with a coarser ``n_sub``): if not, the mean velocity is not
-    converged in the step."""
+    guaranteed converged in the step."""
     delta, eps, w, resolution = _check_common(delta, eps, w, resolution)
     omega_n_ratio = check_omega_n_ratio(omega_n_ratio)
     mu = check_range("mu", mu, 0.0, math.inf, lo_open=True, allow_inf=True)
@@ -353,9 +356,11 @@ def simulate(delta, eps, w, omega_n_ratio, *, mu=math.inf, periods=40,
     return res
 
 
-RUNNER_STEPS_PER_PERIOD = 32768  # sub-steps per runner period 2 pi/omega_n from omega_n/Omega = 2 on
-RUNNER_RESOLVED_MAX = 10.0  # omega_n/Omega up to which the default resolves the runner period
-RUNNER_CAPPED_MAX = 100.0  # up to here capped at the r = 10 count; above, the patch rule only
+RUNNER_STEPS_PER_PERIOD = 128  # sub-steps per runner period 2 pi/omega_n (default_substeps)
+RUNNER_RESOLVED_MAX = 100.0  # omega_n/Omega up to which the default resolves the runner period
+RUNNER_CAPPED_MAX = 1000.0  # up to here capped at the r = 100 count; above, the patch rule only
+PATCH_TRAVEL_MAX = 1 / 16  # patch travel per sub-step, in a1 (4 cells at 64 cells per a1) ...
+PATCH_CELLS_FRICTION = 0.125  # ... and in cells with finite friction (the slip work's edge)
 STEP_TOL_REL, STEP_TOL_EQ32 = 0.01, 1e-3  # stated step tolerance of the default (docstring)
 
 
@@ -368,57 +373,70 @@ def runner_steps_per_period(omega_n_ratio, wave: SquareWave, n_sub, ticks_per_ha
     return n_sub * wave.tau / (r * wave.dt_tick(ticks_per_half))
 
 
-def _runner_steps_wanted(r) -> float:
-    """Sub-steps per runner period that the default asks for at omega_n/Omega = r."""
-    return RUNNER_STEPS_PER_PERIOD * min(1.0, (r / 2.0) ** 2)
-
-
 def default_substeps(omega_n_ratio, wave: SquareWave, resolution, ticks_per_half=1,
                      mu=math.inf) -> int:
     """Sub-steps per tick: the larger of two rules.
 
-    * Patch: move at most one cell per sub-step (1/16 cell with finite friction: the
-      stick-slip bookkeeping is first order in the step, and its energy balance closes to ~1%
-      only from there, see results/stability.md; not where the trailing-edge slip zone spans
-      only a few sub-step travels, e.g. 1 - eps = 1e-5 or mu = 1e4, where the slip work is
-      23-40% low: raise ``n_sub`` as the ``simulate`` docstring says).
-    * Runner: the backward-Euler runner step damps the runner's ringing on the contact
-      stiffness with a numerical damping ratio of about omega_n dt / 2 (39% amplitude per
-      period at 40 sub-steps per runner period), and the mean runner velocity converges only
-      at first order in dt.  ``RUNNER_STEPS_PER_PERIOD`` (32768) sub-steps per runner period
-      from omega_n/Omega = r = 2 on, 32768 (r/2)^2 below (the step error of the mean velocity
-      grows like r^2 there), i.e. 4096 r^3 sub-steps per half period for r <= 2 and 16384 r
-      for 2 <= r <= 10.  Above ``RUNNER_RESOLVED_MAX`` (10) the count is capped at its
-      r = 10 value (163840 per half period), and above ``RUNNER_CAPPED_MAX`` (100) the runner
-      period is not resolved at all (the patch rule alone; the implicit step then gives the
-      massless limit, no net motion): not affordable there.  ``simulate`` says so in both
-      cases (``step_converged`` False and a ``step_note``).
+    * Patch: the patch travels at most a1/16 per sub-step (``PATCH_TRAVEL_MAX``; 4 cells at
+      64 cells per a1) and, with finite friction, at most 1/8 cell (``PATCH_CELLS_FRICTION``:
+      the slip work at the trailing edge).
+    * Runner: ``RUNNER_STEPS_PER_PERIOD`` (128) sub-steps per runner period 2 pi/omega_n,
+      i.e. 64 r per half period at omega_n/Omega = r, up to ``RUNNER_RESOLVED_MAX`` (100).
+      Above it the count is capped at its r = 100 value (6400 per half period), and above
+      ``RUNNER_CAPPED_MAX`` (1000) the runner period is not resolved at all (the patch rule
+      alone: the runner step then blends into backward Euler and gives the massless limit,
+      no net motion).  ``simulate`` says so in both cases (``step_converged`` False and a
+      ``step_note``).
 
-    Measured (delta 0.7, eps 0.1, w 2.5, infinite friction; and eps 0.995, mu 0.3; 64 cells
-    per a1, 40 periods; error against the first-order Richardson extrapolation of runs at 4x
-    and 16x finer steps): the old rule (40 per runner period, at least 1 cell per sub-step)
-    was 1.7% low at r = 1, 26% at 1.5, 67% at 2, 126% high at 3, 29% low at 5, 54% at 7 and
-    of the wrong sign at 10.  With this rule the mean v*/(omega R) is within 1%
-    (``STEP_TOL_REL``) of the extrapolated value for every r in {0.1, 0.2, 0.3, 0.5, 0.7, 1,
-    1.5, 2, 3, 5, 7, 10}, largest at r = 2 (0.6%) and 3 (0.8%); where the mean velocity is
-    itself near zero (mu 0.3 at r = 10: 3.5e-8) the tolerance is ``STEP_TOL_EQ32`` x Eq. 32
-    (measured 2e-6 x Eq. 32 there).  40 vs 80 periods change the converged values by < 1e-5
-    omega R, 32 / 64 / 128 cells per a1 by < 1.2e-5.  Under the cap (10 < r <= 100) the
-    error measured <= 5e-6 omega R (6e-5 x Eq. 32; 0.1% at r = 20, 6% of a velocity of 7e-5
-    at r = 100), but it is not guaranteed.
+    The runner step is exact on the linear piece of the stuck contact (no numerical damping
+    or detuning of the runner's ringing), a trapezoid in the force beyond it, and the slip
+    work is second order in the step: the mean runner velocity and the slip work converge at
+    second order in the sub-step, and the step error of the mean velocity depends on the
+    sub-step, not on the cells (the same within 25% at 16, 64 and 256 cells per a1, r = 2 ..
+    15).
 
-    Cost (2-core machine, 64 cells per a1, 40 periods): 0.4 / 0.5 / 0.6 / 0.7 / 1.1 s at r =
-    2 / 3 / 5 / 7 / 10 with infinite friction (was ~2 ms), 0.5 / 0.8 / 1.4 / 1.9 / 2.7 s with
-    mu 0.3 (was ~0.1 s); the cap bounds it at the r = 10 cost.  Nothing changes for r <= 0.34
-    with mu = inf and r <= 0.85 with finite mu (w 2.5), where the patch rule asks for more."""
+    Measured (delta 0.7, w 2.5, 64 cells per a1, 40 periods; eps 0.1 with mu = inf and eps
+    0.995 with mu 0.3), against the second-order Richardson extrapolation of the two finest
+    runs of a ladder doubling the sub-steps up to 16384 .. 262144 per half period (successive
+    differences falling 4x per doubling; the extrapolated values move by < 2e-9 omega R), for
+    r in {0.1, 0.2, 0.3, 0.5, 0.7, 1, 1.25, 1.5, 1.75, 2, 2.5, 3, 3.5, 4, 5, 6, 7, 8, 10, 12,
+    15, 20, 30, 50, 70, 100} (with infinite friction also 1.8, 1.9, 2.1, 2.2, 2.3, 2.4, 2.7,
+    3.2, 4.5, 5.5): the error of the mean v*/(omega R) stays within
+    ``STEP_TOL_REL`` (1%) of it or, where it is near zero, ``STEP_TOL_EQ32`` x Eq. 32 (the
+    larger), at most 0.15 of that tolerance (r = 2: 1.3e-5 omega R, 0.32%; 0.13 at 2.1, 0.10
+    at 2.5 and 3) with infinite friction and 0.007 of it with mu 0.3, where the slip work is
+    within 0.14% (r <= 100) and the energy residual positive.  The smallest rules that pass:
+    64 sub-steps per runner period (0.70 of the tolerance at r = 2; 32 give 2.7); a patch
+    travel of a1/4 per sub-step with infinite friction (0.36 of it at r = 0.5; 5 a1/16: 1.1);
+    with finite friction 1/8 cell keeps the slip work within 0.45% for trailing-edge slip
+    zones 0.08 to 15 cells wide (eps 0.998 .. 0.99999, 16 to 64 cells per a1), where 1/4 cell
+    is 1.3% and 1 cell 7% high (the zone spanning about one to a few cells); 128 per runner
+    period and a1/16 leave a margin of about 4x in the error.
+
+    Cap: from r ~ 70 on the converged mean velocity is itself below the tolerance (|v*| =
+    2.4e-5, 7.3e-5, 5.4e-6, 6.6e-6, 4.0e-6, 1.9e-7 omega R at r = 70, 100, 200, 1000, 2000,
+    1e4 with infinite friction; the tolerance 8.6e-5), so the massless limit is within it.
+    Capped (100 < r <= 1000) the measured error was <= 1e-3 of the tolerance (0.04-1.4%
+    relative) and the slip work 0.1-3.2% low (r = 200 .. 1000); unresolved (r = 2000, 1e4)
+    the run gives the massless limit, 0.047 and 0.002 of the tolerance off.
+
+    Cost (2-core machine, shared; 64 cells per a1, 40 periods): 2-3 / 3-4 / 5-7 / 6-9 /
+    12-13 ms at r = 2 / 3 / 5 / 7 / 10 with infinite friction and 62-78 ms with mu 0.3 (the
+    patch rule's 1280 sub-steps per half period up to r = 20); at the r = 100 count (r = 100
+    .. 1000) 0.1-0.2 s with infinite friction and 0.4-0.9 s with mu 0.3.  The patch rule governs
+    below r = 0.625 with infinite friction and below r = 20 with finite friction (w 2.5, 64
+    cells per a1)."""
     tick = wave.dt_tick(ticks_per_half)
-    cells = wave.omega_R * tick / (wave.a1 / resolution)
-    n = max(1.0, cells * (16.0 if math.isfinite(mu) else 1.0))
+    travel = wave.omega_R * tick / wave.a1  # patch travel per tick, in a1
+    n = max(1.0, travel / PATCH_TRAVEL_MAX)
+    if math.isfinite(mu):
+        n = max(n, travel * resolution / PATCH_CELLS_FRICTION)
     r = omega_n_ratio
     if 0 < r <= RUNNER_CAPPED_MAX:
         rr = min(r, RUNNER_RESOLVED_MAX)
-        n = max(n, _runner_steps_wanted(rr) * rr * tick / wave.tau)
-    return int(math.ceil(n))
+        n = max(n, RUNNER_STEPS_PER_PERIOD * rr * tick / wave.tau)
+    # (1 - 1e-12): 160.00000000000003 cells from round-off asks for 160 sub-steps, not 161
+    return int(math.ceil(n * (1.0 - 1e-12)))
 
 
 def step_status(omega_n_ratio, wave: SquareWave, n_sub, ticks_per_half=1) -> dict:
@@ -429,21 +447,27 @@ def step_status(omega_n_ratio, wave: SquareWave, n_sub, ticks_per_half=1) -> dic
     have = runner_steps_per_period(r, wave, n_sub, ticks_per_half)
     if math.isinf(have):
         return dict(step_converged=True, runner_steps_per_period=have, step_note="")
-    want = _runner_steps_wanted(r)
+    want = RUNNER_STEPS_PER_PERIOD
     if have >= want * (1 - 1e-9):
         return dict(step_converged=True, runner_steps_per_period=have, step_note="")
-    note = (f"runner period resolved by {have:.3g} sub-steps, below the {want:.3g} that "
-            f"default_substeps asks for at omega_n/Omega = {r:g}: the backward-Euler runner "
-            f"step damps the runner (numerical damping ratio ~{math.pi / have:.2g}), so the "
-            f"mean velocity is not converged in the step to {STEP_TOL_REL:.0%}")
+    note = (f"runner period resolved by {have:.3g} sub-steps, below the {want:g} that "
+            f"default_substeps asks for at omega_n/Omega = {r:g}: the mean velocity is not "
+            f"guaranteed converged in the step to {STEP_TOL_REL:.0%} (its step error is second "
+            "order)")
+    if have < 2 * math.pi / 2.0:
+        note += ("; below about 3 sub-steps per runner period (omega_n dt > 2) the runner "
+                 "step blends into backward Euler, which damps the runner's ringing and tends "
+                 "to the massless limit")
     if r > RUNNER_CAPPED_MAX:
         note += (f" (above omega_n/Omega = {RUNNER_CAPPED_MAX:g} the default does not resolve "
-                 "the runner period: the implicit step tends to the massless limit, no net "
-                 "motion)")
+                 "the runner period: the step gives the massless limit, no net motion, which "
+                 "is within the step tolerance where the mean velocity is itself below it, as "
+                 "measured at delta 0.7, w 2.5 from omega_n/Omega ~ 70 on)")
     elif r > RUNNER_RESOLVED_MAX:
         note += (f" (sub-steps capped at their omega_n/Omega = {RUNNER_RESOLVED_MAX:g} value; "
-                 "measured at delta 0.7, eps 0.1, w 2.5 up to omega_n/Omega = 100 the capped "
-                 "default stayed within 5e-6 omega R of the converged value)")
+                 "measured at delta 0.7, w 2.5 up to omega_n/Omega = 1000 the capped default "
+                 "stayed within 1e-3 of the step tolerance of the converged mean velocity, "
+                 "the slip work within 3.2%)")
     return dict(step_converged=False, runner_steps_per_period=have, step_note=note)
 
 

@@ -158,8 +158,8 @@ def test_very_light_runner_needs_few_solver_iterations(monkeypatch):
 
 
 # converged mean v*/(omega R) at delta 0.7, eps 0.1, w 2.5, infinite friction, omega_n/Omega
-# = 5: Richardson extrapolation in the sub-step (first order, runs at 8192 .. 65536 sub-steps
-# per runner period), the same to 1e-5 at 80 periods and to 1e-5 at 32 and 128 cells per a1
+# = 5, 64 cells per a1, 40 periods: Richardson extrapolation in the sub-step (second order,
+# runs at 8192 and 16384 sub-steps per half period: 0.0200303)
 STIFF_R5_CONVERGED = 0.02003
 
 
@@ -167,9 +167,9 @@ def test_resonant_band_exceeds_quasi_static_and_stiff_runner_collapses():
     """Mean velocity above Eq. 32 around omega_n/Omega ~ 0.5-1 (1.6 x Eq. 32 at 0.7), far
     below it for stiff runners, with partial revivals: at omega_n/Omega = 5 the converged
     value is 0.02003 = 0.23 x Eq. 32 (0.049 / 0.057 / 0.17 x at 2 / 3 / 7, see README).
-    The default sub-steps give it within their stated 1% (``experiments.STEP_TOL_REL``); the
-    old 40 sub-steps per runner period gave 0.0141, 29% low, which this test once took for
-    the collapse."""
+    The default sub-steps give it within their stated 1% (``experiments.STEP_TOL_REL``;
+    measured 1e-5 relative); 40 sub-steps per runner period with a first-order runner step
+    give 0.0141, 29% low, which looks like the collapse."""
     eq = analytic.eq32(0.7, 0.1, 2.5)
     res = ex.simulate(0.7, 0.1, 2.5, 0.7, periods=40)["mean_v_star_over_omega_R"]
     stiff = ex.simulate(0.7, 0.1, 2.5, 5.0, periods=40)
@@ -248,9 +248,10 @@ def test_energy_ledger_is_scale_free_in_mu():
     """With full sliding every energy scales with mu, so the relative residual must not depend
     on mu.  (The release energy of a cell leaving the contact within a sub-step was booked from
     its unclipped creep, a mu-independent amount: -25% at mu = 1e-6 before it was bounded by
-    what the cell can hold.)"""
-    res = [ex.simulate(0.7, 0.1, 2.5, 0.3, mu=mu, periods=4, resolution=16)["energy_residual"]
-           for mu in (1e-2, 1e-4, 1e-7)]
+    what the cell can hold.)  640 sub-steps per half period (1/16 cell): the residual of full
+    sliding is first order in the step (measured -1.2e-3 here, -2.5e-3 at 320)."""
+    res = [ex.simulate(0.7, 0.1, 2.5, 0.3, mu=mu, periods=4, resolution=16,
+                       n_sub=640)["energy_residual"] for mu in (1e-2, 1e-4, 1e-7)]
     assert all(-2e-3 < x < 5e-2 for x in res), f"residuals {res}"
     assert max(res) - min(res) < 2e-4, f"residual depends on mu: {res}"
 

@@ -11,7 +11,9 @@ def register(sub):
                        description="Runner mass from omega_n/Omega = 1e-3 to massless, mu from "
                        "1e-4 to inf, delta 1e-4 and 1, w above and below 2, lift-off mid-step, "
                        "maximal rates (100 and 6400 cells per sub-step), a run of 1e5 ticks, "
-                       "sub-steps from 1 to 1e4 per half period; check finiteness, the energy "
+                       "sub-steps from 1 to 1e4 per half period, and at the env's own settings "
+                       "(default scene) runners from omega_n/Omega = 1e-3 to 1e4 and massless; "
+                       "check finiteness, the energy "
                        "balance, run time and convergence; write a markdown table (PASS/FAIL per "
                        "case, tolerances stated in it) and print it.  Exit code 1 if any case "
                        "fails.")
