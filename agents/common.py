@@ -525,22 +525,76 @@ def save_model(model, vecnorm, folder: str | os.PathLike, name: str = "model") -
 
 
 # ----------------------------------------------------------------- scenes of runs
+#: the scene keys that set how finely the env integrates the physics, not the physics or
+#: the task (``n_sub``: the sub-steps per tick they resolve to, ``Scene.n_sub``).  A run whose
+#: recorded scene differs from the evaluated one only in these is evaluated and marked
+#: (``numerics_note``); a difference in any other key refuses it.
+NUMERICS_KEYS = ("sub_steps", "resolution", "accuracy", "n_sub")
+
+
 def scene_fields(scene) -> dict:
     """What a run was trained on: the checked Scene's fields (``load_scene``) except its name
-    and description, which change nothing in the env."""
+    and description, which change nothing in the env, plus ``n_sub``, the sub-steps per tick
+    the env takes (``sub_steps: auto`` alone does not say how many: that depends on the
+    scene's ``accuracy`` and on the rule of ``rolling_env.scenes.auto_sub_steps``)."""
     import dataclasses
 
     from rolling_env.scenes import Scene, load_scene
     sc = scene if isinstance(scene, Scene) else load_scene(scene)
-    return {k: v for k, v in dataclasses.asdict(sc).items() if k not in ("name", "description")}
+    fields = {k: v for k, v in dataclasses.asdict(sc).items()
+              if k not in ("name", "description")}
+    fields["n_sub"] = int(sc.n_sub)
+    return fields
+
+
+def fields_digest(fields: dict) -> str:
+    """SHA-256 (hex) of a ``scene_fields`` mapping (keys sorted, floats as repr: exact)."""
+    import hashlib
+    import json
+    return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()
 
 
 def scene_digest(scene) -> str:
-    """SHA-256 (hex) of ``scene_fields``: equal digests, equal physics and task."""
-    import hashlib
-    import json
-    text = json.dumps(scene_fields(scene), sort_keys=True)  # floats as repr: exact
-    return hashlib.sha256(text.encode()).hexdigest()
+    """SHA-256 (hex) of ``scene_fields``: equal digests, equal physics, task and numerics."""
+    return fields_digest(scene_fields(scene))
+
+
+def completed_fields(fields: dict) -> dict:
+    """A run's recorded ``scene_fields`` with what a run recorded before a key existed filled
+    in: a Scene field with a default (``accuracy``) takes its default, as a scene file that
+    leaves it out does, and ``n_sub`` the recorded ``sub_steps`` where that is a number."""
+    import dataclasses
+
+    from rolling_env.scenes import Scene
+    out = dict(fields)
+    for f in dataclasses.fields(Scene):
+        if f.name not in out and f.name not in ("name", "description") \
+                and f.default is not dataclasses.MISSING:
+            out[f.name] = f.default
+    sub = out.get("sub_steps")
+    if "n_sub" not in out and isinstance(sub, int) and not isinstance(sub, bool):
+        out["n_sub"] = sub
+    return out
+
+
+def _sub_steps_text(fields: dict) -> str:
+    sub, n = fields.get("sub_steps", "-"), fields.get("n_sub")
+    return f"auto: {n}" if sub == "auto" and n is not None else f"{sub}"
+
+
+def numerics_note(trained: dict, now: dict) -> str:
+    """What differs between two ``scene_fields`` in ``NUMERICS_KEYS``, for the tables:
+    ``sub_steps 8 (now auto: 23), resolution 16 (now 32)``; "" where nothing does."""
+    parts = []
+    if any(trained.get(k) != now.get(k) for k in ("sub_steps", "n_sub")):
+        parts.append(f"sub_steps {_sub_steps_text(trained)} (now {_sub_steps_text(now)})")
+    for k in ("resolution", "accuracy"):
+        if trained.get(k) != now.get(k):
+            parts.append(f"{k} {trained.get(k, '-'):g} (now {now.get(k, '-'):g})"
+                         if isinstance(trained.get(k), (int, float))
+                         and isinstance(now.get(k), (int, float))
+                         else f"{k} {trained.get(k, '-')!r} (now {now.get(k, '-')!r})")
+    return ", ".join(parts)
 
 
 def scene_key(scene) -> str:
@@ -565,8 +619,9 @@ def scene_key(scene) -> str:
 
 
 def differing_fields(a: dict, b: dict) -> str:
-    """``key a -> b`` for the fields where two ``scene_fields`` differ (for messages)."""
-    keys = sorted(set(a) | set(b))
+    """``key a vs b`` for the fields where two ``scene_fields`` differ (for messages), the
+    physics and task keys before the numerics (``NUMERICS_KEYS``)."""
+    keys = sorted(set(a) | set(b), key=lambda k: (k in NUMERICS_KEYS, k))  # physics first
     diff = [f"{k} {a.get(k, '-')!r} vs {b.get(k, '-')!r}" for k in keys if a.get(k) != b.get(k)]
     return ", ".join(diff[:6]) + (f" (+{len(diff) - 6} more)" if len(diff) > 6 else "")
 

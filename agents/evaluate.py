@@ -5,7 +5,9 @@
     python -m agents.evaluate --baselines-only --scenes default   # no trained agents needed
 
 Controllers: the two Eq. 32 baselines and every trained agent under ``<runs>/<scene key>/*/``
-(``common.scene_key``; each run checked to be trained on the scene's content, ``check_run_scene``)
+(``common.scene_key``; each run checked to be trained on the scene's physics and task,
+``check_run_scene``: one trained on other numerics of it is evaluated as it is and marked in
+the tables, the CSV's ``trained_numerics`` and the plots)
 (``agent_files``: the final model, or with ``--model best`` EvalCallback's best model when its
 VecNormalize statistics were saved with it; an interrupted run's checkpoint where there is
 neither; the statistics saved beside the model; a model whose statistics were saved at
@@ -43,9 +45,10 @@ from .common import (SAVED_AT, atomic_write, buildable_scene, one_line, run_conf
                      scene_key)
 
 EVAL_SEED = 20261122  # held out: training uses seeds < 1e6, evaluation envs seed + 10000
-#: --episodes at most: an episode of a shipped scene (512 ticks) takes about 0.1 s per
-#: controller on the 2-core machine, so 1e5 episodes are about 3 hours per controller and
-#: scene (1e9 built arrays until the process was killed for memory)
+#: --episodes at most: an episode of a shipped scene (512 ticks) takes about 0.25 s per
+#: controller on the 2-core machine, averaged over the shipped scenes (from heavy_inf_friction's
+#: 8 sub-steps per tick to light_stiff's 75), so 1e5 episodes are about 7 hours per controller
+#: and scene (1e9 built arrays until the process was killed for memory)
 EPISODES_MAX = 10**5
 
 
@@ -213,20 +216,27 @@ def _stem(scene) -> str:
     return p.stem if p.suffix.lower() in (".yaml", ".yml") else str(scene)
 
 
-def check_run_scene(run: Path, scene, by_key: bool = True) -> None:
-    """Refuse a run that was not trained on ``scene`` as it stands: scene overrides in its
-    env_kwargs (an agent trained with mu = 0.02 would be reported as if trained on the plain
-    scene), scene content (``common.scene_digest``, recorded by agents.train) other than
-    ``scene``'s, and with ``by_key`` (evaluate: runs are tabulated by key) another scene key
-    (a scene file whose stem names a shipped scene but whose content differs has its own
-    key, ``common.scene_key``).  A run without a config.yml is not checked; one from before
-    the digest was recorded is checked by the scene's name, with a warning."""
+def check_run_scene(run: Path, scene, by_key: bool = True) -> str:
+    """Refuse a run that was not trained on ``scene``'s physics and task: scene overrides in
+    its env_kwargs (an agent trained with mu = 0.02 would be reported as if trained on the
+    plain scene), scene content (``common.scene_fields``, recorded with their digest by
+    agents.train) other than ``scene``'s in any key but the numerics (``NUMERICS_KEYS``), and
+    with ``by_key`` (evaluate: runs are tabulated by key) another scene key (a scene file
+    whose stem names a shipped scene but whose content differs has its own key,
+    ``common.scene_key``).  A run whose recorded scene differs only in its numerics
+    (sub-steps, resolution, accuracy: the same physics and task, integrated otherwise) is
+    evaluated as it is: the return value says what differs (``common.numerics_note``; "" where
+    nothing does) and a warning is printed.  The recorded fields are compared key by key only
+    where they reproduce the recorded digest; otherwise any digest difference refuses the
+    run.  A run without a config.yml is not checked; one from before the digest was recorded
+    is checked by the scene's name, with a warning."""
     from rolling_env.scenes import Scene
 
-    from .common import differing_fields, scene_digest, scene_fields, scene_key
+    from .common import (NUMERICS_KEYS, completed_fields, differing_fields, fields_digest,
+                         numerics_note, scene_fields, scene_key)
     cfg = run_config(run)  # a damaged config.yml: a ValueError naming it
     if cfg is None:
-        return
+        return ""
     trained = cfg.get("scene")
     digest = cfg.get("scene_digest")
     trained_key = cfg.get("scene_key", None if trained is None else _stem(trained))
@@ -245,11 +255,25 @@ def check_run_scene(run: Path, scene, by_key: bool = True) -> None:
     if digest is None:
         print(f"warning: {run}/config.yml records no scene_digest (an older run): its scene "
               f"is checked by name only", file=sys.stderr)
-    elif digest != scene_digest(scene):
-        diff = differing_fields(dict(cfg.get("scene_fields") or {}), scene_fields(scene))
+        return ""
+    now = scene_fields(scene)
+    if digest == fields_digest(now):
+        return ""
+    recorded = dict(cfg.get("scene_fields") or {})
+    trusted = bool(recorded) and fields_digest(recorded) == digest
+    full = completed_fields(recorded) if trusted else recorded
+    differ = [k for k in set(full) | set(now) if full.get(k, "-") != now.get(k, "-")]
+    if not trusted or any(k not in NUMERICS_KEYS for k in differ):
+        diff = differing_fields(full, now)
         raise ValueError(f"run {str(run)!r} was trained on a scene whose content differs from "
                          f"{name!r} (trained vs now: {diff or 'scene digest differs'}): not "
                          "comparable")
+    note = numerics_note(full, now)
+    if note:
+        print(f"warning: {run} was trained on other numerics of scene {name!r} ({note}; the "
+              "physics and task keys are equal): it is evaluated as it is, on the scene's "
+              "numerics as they are now", file=sys.stderr)
+    return note
 
 
 def scene_runs(scene: str, runs: Path | None) -> list[Path]:
@@ -271,8 +295,9 @@ def _natural(path: Path) -> list:
 
 def controllers_for(scene: str, runs: Path | None, env, model: str = "final") -> dict:
     """The two baselines and every run's agent (``model``: which of its models, see
-    ``agent_files``; each run checked to be trained on ``scene``,
-    its meta.json and evaluations.npz read); ``runs`` None: the baselines alone.  A run
+    ``agent_files``; each run checked to be trained on ``scene``, ``check_run_scene``: what
+    differs in the numerics it was trained on is the agent's ``numerics``; its meta.json and
+    evaluations.npz read); ``runs`` None: the baselines alone.  A run
     folder named like a baseline is refused (it would replace the baseline's row); a damaged
     file of a run is a ValueError naming it, before any episode runs."""
     ctrls = {"eq32-open-loop": Eq32OpenLoop.from_env(env),
@@ -287,7 +312,7 @@ def controllers_for(scene: str, runs: Path | None, env, model: str = "final") ->
             if run.name in BASELINES:
                 raise ValueError(f"run folder {str(run)!r} has the name of a baseline: rename "
                                  "it (its row would replace the baseline's)")
-            check_run_scene(run, scene)
+            numerics = check_run_scene(run, scene)
             _budget(run)
         learning_curve(run)  # plotted for every run folder of the scene
         for k, path in enumerate(files):
@@ -298,7 +323,7 @@ def controllers_for(scene: str, runs: Path | None, env, model: str = "final") ->
                     raise
                 print(f"warning: {run}: {e}; trying {files[k + 1].name}", file=sys.stderr)
                 continue
-            agent.file, agent.run = path.name, run
+            agent.file, agent.run, agent.numerics = path.name, run, numerics
             ctrls[run.name] = agent
             break
     return ctrls
@@ -339,6 +364,7 @@ def evaluate_scene(scene: str, runs: Path, episodes: int, env=None,
         row["tolerance"] = tol
         row.update(_budget(getattr(ctrl, "run", None)))
         row["config_key"] = _config_key(getattr(ctrl, "run", None))
+        row["trained_numerics"] = getattr(ctrl, "numerics", "")  # "" where trained on these
         rows.append(row)
     env.close()
     return rows, trajectories
@@ -394,7 +420,7 @@ def learning_curve(run: Path):
 COLS = ["scene", "controller", "model_file", "episodes", "tolerance", "final_abs_error_mean",
         "final_abs_error_std", "rms_error_mean", "rms_error_std", "reached_fraction",
         "settle_time_mean", "slip_work_mean", "slip_work_std", "return_mean", "return_std",
-        "train_env_steps", "train_wall_seconds", "machine"]
+        "train_env_steps", "train_wall_seconds", "machine", "trained_numerics"]
 BASELINES = ("eq32-open-loop", "eq32-feedback")
 
 
@@ -457,7 +483,7 @@ def seed_summary(rows: list[dict]) -> list[dict]:
         met = [verdicts[(scene, r["controller"])]["met"] for r in rs
                if (scene, r["controller"]) in verdicts]
         out.append({"scene": scene, "agent": name, "seeds": len(rs),
-                    "seed_list": sorted(seeds),
+                    "seed_list": sorted(seeds), "runs": [r["controller"] for r in rs],
                     "error_mean": float(err.mean()), "error_min": float(err.min()),
                     "error_max": float(err.max()), "slip_mean": float(slip.mean()),
                     "slip_min": float(slip.min()), "slip_max": float(slip.max()),
@@ -473,6 +499,24 @@ def _fmt_settle(st: float) -> str:
     return "never" if not np.isfinite(st) else f"{st * 1e3:.2f}"
 
 
+def numerics_marks(rows: list[dict]) -> dict:
+    """``{note: k}``: footnote number k (from 1, in the order of the rows) of each distinct
+    ``trained_numerics`` note of the rows (agents trained on other numerics of their scene)."""
+    marks: dict = {}
+    for r in rows:
+        note = r.get("trained_numerics") or ""
+        if note and note not in marks:
+            marks[note] = len(marks) + 1
+    return marks
+
+
+def _marked(name: str, notes, marks: dict) -> str:
+    """``name [k]`` with the footnote numbers of ``notes`` (one note or several)."""
+    notes = [notes] if isinstance(notes, str) else list(notes)
+    ks = sorted({marks[n] for n in notes if n})
+    return name + "".join(f" [{k}]" for k in ks)
+
+
 def write_tables(rows: list[dict], out: Path, episodes: int | None = None,
                  model: str = "final") -> None:
     buf = io.StringIO()
@@ -485,6 +529,8 @@ def write_tables(rows: list[dict], out: Path, episodes: int | None = None,
                       if r.get("episode_steps")})
     length = ("; ".join(f"{k} ticks = {t * 1e3:.3g} ms" for k, t in lengths)
               or "the scene's episode_steps")
+    marks = numerics_marks(rows)
+    note_of = {(r["scene"], r["controller"]): r.get("trained_numerics") or "" for r in rows}
     lines = ["# Controllers compared on held-out targets", "",
              "Generated by `python -m agents.evaluate` (see README).  Per scene every controller "
              f"runs the same {n} held-out targets (drawn with seed {EVAL_SEED} from the "
@@ -499,21 +545,30 @@ def write_tables(rows: list[dict], out: Path, episodes: int | None = None,
              + ("the final model of each run (`--model final`)" if model == "final" else
                 "EvalCallback's best model of each run where it has one with its statistics, "
                 "else its final model or checkpoint (`--model best`)")
-             + "; *model* names the file evaluated.", "",
+             + "; *model* names the file evaluated."
+             + ("  Agents marked [k] were trained on their scene with other numerics (the "
+                "keys sub_steps, resolution and accuracy, which set how finely the env "
+                "integrates the same physics; the notes below the table say what differed) and "
+                "the same physics and task keys: they are evaluated as they are, not retrained, "
+                "on the scene's numerics as they are now, like the baselines."
+                if marks else ""), "",
              "| scene | controller | model | final abs error / tol (mean ± std) | RMS error / "
              "tol | reached | settle [ms] | slip work [nJ] (mean ± std) | training (env steps, "
              "wall s) |",
              "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         tol = r["tolerance"]
+        name = _marked(r["controller"], note_of[(r["scene"], r["controller"])], marks)
         budget = (f"{r['train_env_steps']:,}, {r['train_wall_seconds']:.0f}"
                   if r["train_env_steps"] else "-")
         lines.append(
-            f"| {r['scene']} | {r['controller']} | {r.get('model_file', '-')} | "
+            f"| {r['scene']} | {name} | {r.get('model_file', '-')} | "
             f"{r['final_abs_error_mean'] / tol:.2f} ± "
             f"{r['final_abs_error_std'] / tol:.2f} | {r['rms_error_mean'] / tol:.1f} | "
             f"{100 * r['reached_fraction']:.0f}% | {_fmt_settle(r['settle_time_mean'])} | "
             f"{r['slip_work_mean'] * 1e9:.3g} ± {r['slip_work_std'] * 1e9:.2g} | {budget} |")
+    if marks:
+        lines += [""] + [f"* [{k}] trained on other numerics: {note}" for note, k in marks.items()]
     verdicts = goal_verdicts(rows)
     if verdicts:
         lines += ["", "## The goal: at most half the best baseline's final error at no more slip "
@@ -524,7 +579,8 @@ def write_tables(rows: list[dict], out: Path, episodes: int | None = None,
                   "slip work agent / baseline | met |", "|---|---|---|---|---|---|"]
         for v in verdicts:
             sr = v["slip_ratio"]
-            lines.append(f"| {v['scene']} | {v['agent']} | {v['baseline']} | "
+            agent = _marked(v["agent"], note_of.get((v["scene"], v["agent"]), ""), marks)
+            lines.append(f"| {v['scene']} | {agent} | {v['baseline']} | "
                          f"{v['error_ratio']:.2f} | {_fmt_ratio(sr)}"
                          f" | {'yes' if v['met'] else 'no'} |")
     summary = seed_summary(rows)
@@ -538,16 +594,26 @@ def write_tables(rows: list[dict], out: Path, episodes: int | None = None,
                   "|---|---|---|---|---|---|"]
         for g in summary:
             seeds = ", ".join(str(k) for k in g["seed_list"])
-            lines.append(f"| {g['scene']} | {g['agent']} | {seeds} | {g['error_mean']:.2f} "
+            agent = _marked(g["agent"], [note_of.get((g["scene"], c), "") for c in g["runs"]],
+                            marks)
+            lines.append(f"| {g['scene']} | {agent} | {seeds} | {g['error_mean']:.2f} "
                          f"({g['error_min']:.2f}-{g['error_max']:.2f}) | "
                          f"{g['slip_mean'] * 1e9:.3g} ({g['slip_min'] * 1e9:.3g}-"
                          f"{g['slip_max'] * 1e9:.3g}) | {g['met']} of {g['judged']} |")
     atomic_write(out / "comparison.md", lambda p: Path(p).write_text("\n".join(lines) + "\n"))
 
 
-def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path) -> Path:
+def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path,
+               notes: dict | None = None, marks: dict | None = None) -> Path:
     """results/plots/<scene>.png: the runner on held-out target 0 for every controller, its
-    |error| / tolerance (log), and the learning curves (EvalCallback) of the scene's runs."""
+    |error| / tolerance (log), and the learning curves (EvalCallback) of the scene's runs.
+    ``notes``: controller -> what differed in the numerics it was trained on
+    (``trained_numerics``), shown with the tables' footnote numbers ``marks``
+    (``numerics_marks``; numbered here where not given) in the legends and under the plot."""
+    notes = {k: v for k, v in (notes or {}).items() if v}
+    if marks is None:
+        marks = numerics_marks([{"trained_numerics": n} for n in notes.values()])
+    labels = {name: _marked(name, note, marks) for name, note in notes.items()}
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -558,9 +624,10 @@ def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path) -> Path:
     # the same in every panel
     for name, data in trajectories.items():
         ls = "--" if name in BASELINES else "-"
-        ax[0].plot(data["t"] * 1e3, data["xstar"] * 1e9, ls, label=name, color=colors[name])
+        label = labels.get(name, name)
+        ax[0].plot(data["t"] * 1e3, data["xstar"] * 1e9, ls, label=label, color=colors[name])
         ax[1].semilogy(data["t"] * 1e3, np.maximum(np.abs(data["error"]) / tol, 1e-3), ls,
-                       label=name, color=colors[name])
+                       label=label, color=colors[name])
     first = next(iter(trajectories.values()))
     ax[0].plot(first["t"] * 1e3, first["target"] * 1e9, "k:", label="target")
     ax[0].set(xlabel="t [ms]", ylabel="runner x* [nm]",
@@ -574,7 +641,7 @@ def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path) -> Path:
         if curve is not None:
             steps, mean, std = curve
             color = colors.get(run.name, "0.5")  # grey: a run without a model
-            ax[2].plot(steps, mean, label=run.name, color=color)
+            ax[2].plot(steps, mean, label=labels.get(run.name, run.name), color=color)
             ax[2].fill_between(steps, mean - std, mean + std, alpha=0.2, color=color)
     ax[2].set(xlabel="env steps", ylabel="eval return (mean ± std over episodes)",
               title="learning curves (EvalCallback)")
@@ -584,6 +651,11 @@ def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path) -> Path:
         ax[2].text(0.5, 0.5, "no learning curves\n(baselines only, or no evaluations.npz)",
                    ha="center", va="center", transform=ax[2].transAxes, fontsize=9)
     fig.tight_layout()
+    shown = sorted({marks[n]: n for n in notes.values()}.items())
+    if shown:  # which numerics the marked agents were trained on, under the panels
+        fig.subplots_adjust(bottom=0.2)
+        fig.text(0.01, 0.01, "; ".join(f"[{k}] trained on other numerics: {n}"
+                                       for k, n in shown), fontsize=8, va="bottom")
     path = atomic_write(out / "plots" / f"{scene_key(scene)}.png",
                         lambda p: fig.savefig(p, dpi=80, format="png"))
     plt.close(fig)
@@ -598,7 +670,7 @@ def main(argv=None):
     p.add_argument("--runs", default="runs", help="folder of training runs (<runs>/<scene>/<run>/)")
     p.add_argument("--episodes", type=positive_int("episodes", 1, EPISODES_MAX), default=20,
                    help=f"held-out targets per scene, 1 to {EPISODES_MAX:,} (an episode takes "
-                   "about 0.1 s per controller; default 20)")
+                   "about 0.25 s per controller on the shipped scenes; default 20)")
     p.add_argument("--out", default="results",
                    help="output folder of comparison.md, .csv and plots/ (default results, "
                         "relative to the current directory)")
@@ -654,8 +726,12 @@ def main(argv=None):
                   f"{row['final_abs_error_mean'] / row['tolerance']:8.2f}  reached "
                   f"{row['reached_fraction']:.2f}  slip {row['slip_work_mean']:.3e} J", flush=True)
     with staged():  # written only once every scene has been evaluated, and all or none
+        marks = numerics_marks(rows)
         for scene, traj in plots:
-            plot_scene(scene, runs, traj, out)
+            key = scene_key(scene)
+            notes = {r["controller"]: r.get("trained_numerics", "") for r in rows
+                     if r["scene"] == key}
+            plot_scene(scene, runs, traj, out, notes, marks)
         write_tables(rows, out, args.episodes, args.model)
     return 0
 

@@ -677,6 +677,126 @@ def test_evaluate_refuses_a_run_whose_scene_file_changed(trained_run, tmp_path, 
     assert e.value.code == 2 and "content differs" in err and "runner_mass" in err, err
 
 
+def _as_if_trained_on(run, **changes):
+    """Rewrite a run's config.yml as agents.train would have written it on the scene with
+    ``changes`` to its recorded fields (a key given as None left out, as a run recorded
+    before the key existed): fields and their digest."""
+    from agents.common import fields_digest
+    cfg_path = run / "config.yml"
+    cfg = yaml.safe_load(cfg_path.read_text())
+    fields = dict(cfg["scene_fields"])
+    for k, v in changes.items():
+        if v is None:
+            fields.pop(k, None)
+        else:
+            fields[k] = v
+    cfg.update(scene_fields=fields, scene_digest=fields_digest(fields))
+    cfg_path.write_text(yaml.safe_dump(cfg))
+    return cfg
+
+
+def test_numerics_of_a_recorded_scene_are_completed_and_described():
+    """A run recorded before a scene key existed (``accuracy``, ``n_sub``) is read with the
+    key's default (the recorded sub_steps for n_sub): no difference where nothing else
+    changed; the note names what differs in the numerics, the resolved sub-steps too; the
+    shipped scenes record the sub-steps they resolve to."""
+    from agents.common import completed_fields, numerics_note, scene_fields
+    now = scene_fields("heavy_inf_friction")
+    n = rolling_env.scenes.load_scene("heavy_inf_friction").n_sub
+    assert now["sub_steps"] == "auto" and now["n_sub"] == n and now["accuracy"] == 0.01, now
+    assert now["resolution"] == 16, "the notes below assume 16 cells per radius"
+    old = {k: v for k, v in now.items() if k not in ("accuracy", "n_sub")}
+    assert completed_fields(dict(old, sub_steps="auto"))["accuracy"] == 0.01
+    assert numerics_note(completed_fields(dict(old, sub_steps=8)), now) == (
+        f"sub_steps 8 (now auto: {n})")
+    assert numerics_note(completed_fields(dict(now)), now) == ""
+    assert numerics_note(completed_fields(dict(old, sub_steps=n + 1, resolution=32.0,
+                                               accuracy=0.05)), now) == (
+        f"sub_steps {n + 1} (now auto: {n}), resolution 32 (now 16), accuracy 0.05 (now 0.01)")
+
+
+def test_a_run_trained_on_other_numerics_is_evaluated_and_marked(trained_run, tmp_path, capsys):
+    """A run whose recorded scene differs from the evaluated one only in its numerics
+    (sub_steps, resolution, accuracy; recorded before accuracy and n_sub existed, as the
+    committed runs were) is evaluated as it is, and every place that reports it says so:
+    a warning, the CSV's trained_numerics, a footnote mark in the three tables with the note
+    under the first, and the plot's legend.  `rolling-drive rollout` takes its model too."""
+    import shutil
+
+    from agents.evaluate import main as evaluate_main
+    from rolling_env.cli import main as cli_main
+    scene, runs = trained_run
+    shutil.copytree(runs / "myscene" / "ppo_seed0", tmp_path / "runs" / "myscene" / "ppo_seed0")
+    shutil.copytree(runs / "myscene" / "ppo_seed0", tmp_path / "runs" / "myscene" / "ppo_seed1")
+    for seed in (0, 1):
+        _as_if_trained_on(tmp_path / "runs" / "myscene" / f"ppo_seed{seed}", sub_steps=4,
+                          resolution=12.0, accuracy=None, n_sub=None)
+    sc = rolling_env.scenes.load_scene(str(scene))
+    assert sc.sub_steps == "auto" and sc.n_sub != 4 and sc.resolution == 16
+    out = tmp_path / "out"
+    assert evaluate_main(["--scenes", str(scene), "--runs", str(tmp_path / "runs"),
+                          "--episodes", "1", "--out", str(out)]) == 0
+    note = f"sub_steps 4 (now auto: {sc.n_sub}), resolution 12 (now 16)"
+    err = capsys.readouterr().err
+    assert err.count("trained on other numerics") == 2 and note in err, err
+    with open(out / "comparison.csv") as f:
+        rows = {r["controller"]: r for r in csv.DictReader(f)}
+    assert rows["ppo_seed0"]["trained_numerics"] == note, rows["ppo_seed0"]
+    assert rows["eq32-feedback"]["trained_numerics"] == "", "a baseline is never marked"
+    md = (out / "comparison.md").read_text()
+    assert "| myscene | ppo_seed0 [1] | model.zip |" in md, md
+    assert f"* [1] trained on other numerics: {note}\n" in md, md
+    assert "| myscene | ppo_seed1 [1] | eq32-open-loop |" in md, "goal table not marked"
+    assert "| myscene | ppo [1] | 0, 1 |" in md, "seed summary not marked"
+    assert "| myscene | eq32-feedback | - |" in md
+    assert (out / "plots" / "myscene.png").stat().st_size > 0
+    model = tmp_path / "runs" / "myscene" / "ppo_seed0" / "model.zip"
+    assert cli_main(["rollout", "--scene", str(scene), "--controller", str(model),
+                     "--out", str(tmp_path / "roll"), "--json"]) == 0
+    assert "trained on other numerics" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("changes,names", [
+    ({"sub_steps": 4, "mu": 0.3}, ["mu 0.3 vs inf", "sub_steps 4 vs 'auto'"]),  # physics too
+    ({"resolution": 12.0, "episode_steps": 256}, ["episode_steps 256 vs 512"]),  # the task
+    ({"resolution": 12.0, "ticks_per_period": 16}, ["ticks_per_period 16 vs 8"]),
+])
+def test_a_run_trained_on_other_physics_or_task_stays_refused(trained_run, tmp_path, capsys,
+                                                              changes, names):
+    """A recorded scene that differs in a physics or task key is refused as before (exit 2,
+    the keys named with the physics first, nothing written), also where its numerics differ
+    too; so is a record whose fields do not reproduce its digest (edited by hand: its fields
+    cannot be trusted key by key)."""
+    import shutil
+
+    from agents.evaluate import main as evaluate_main
+    scene, runs = trained_run
+    run = tmp_path / "runs" / "myscene" / "ppo_seed0"
+    shutil.copytree(runs / "myscene" / "ppo_seed0", run)
+    cfg = _as_if_trained_on(run, **changes)
+    argv = ["--scenes", str(scene), "--runs", str(tmp_path / "runs"), "--episodes", "1",
+            "--out", str(tmp_path / "out")]
+    with pytest.raises(SystemExit) as e:
+        evaluate_main(argv)
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "content differs" in err and "not comparable" in err, err
+    assert "trained on other numerics" not in err, err
+    trained_vs_now = err.split("trained vs now: ")[1]
+    for n in names:
+        assert n in trained_vs_now, err
+    numerics_key = "resolution" if "resolution" in changes else "sub_steps"
+    assert trained_vs_now.index(names[0]) < trained_vs_now.index(numerics_key), err
+    assert not (tmp_path / "out" / "comparison.csv").exists()
+    # numerics only, but the digest is not that of the recorded fields: refused
+    (run / "config.yml").write_text(yaml.safe_dump(dict(
+        cfg, scene_fields={k: v for k, v in cfg["scene_fields"].items()
+                           if k not in changes or k in ("sub_steps", "resolution")})))
+    with pytest.raises(SystemExit) as e:
+        evaluate_main(argv)
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "content differs" in err, err
+
+
 def test_rollout_cli_refuses_a_model_of_another_scene_and_names_files_by_run(trained_run,
                                                                              tmp_path, capsys):
     """`rolling-drive rollout --controller <run>/model.zip --scene X` refuses a model whose
