@@ -1424,11 +1424,14 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
             else:
                 imp = SIA + SIB * s  # no slip: exact integral of T over the sub-step
             work_r = vb * imp
-            if mass is not None and mass > 0.0:
-                # a free runner's impulse and work from its own equation (exact on the
-                # force law's linear piece, where the cells' integrals assume a constant
-                # creep rate over the sub-step), as far as the step is the exact one (lam;
-                # backward Euler's runner sees the cells' constant creep rate)
+            if mass is not None and mass > 0.0 and not clipped:
+                # a free runner on a stuck contact: its impulse and work from its own
+                # equation (exact on the force law's linear piece, where the cells' integrals
+                # assume a constant creep rate over the sub-step), as far as the step is the
+                # exact one (lam; backward Euler's runner sees the cells' constant creep
+                # rate).  Where cells slid the cells' own integrals are the better impulse
+                # (the piece's linear force ramp misses the limits' motion: 1% of the drive
+                # work at one cell per sub-step)
                 imp = lam * (mass * (v1 - v0) - F * dt) + (1.0 - lam) * imp
                 work_r = (lam * (0.5 * mass * (v1 - v0) * (v1 + v0) - F * vb * dt)
                           + (1.0 - lam) * work_r)
