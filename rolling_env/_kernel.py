@@ -131,19 +131,20 @@ W_U, W_A, W_B, W_L = 0, 1, 2, 3
 
 # rows of the friction work array L = W[W_L:]
 L_LIMIT = 0      # friction limit mu E*/G* integral of uN over the cell's part in contact
-L_E0, L_E1, L_E2 = 1, 2, 3  # released energy of an edge cell this sub-step: e0 + e1 s + e2 s^2
-L_QLIM = 4       # friction limit per unit overlap of an edge cell at the end of the sub-step:
-                 # mu E*/G* times the mean uN over its part in contact (0: none in contact)
-N_LCOL = 8       # rows of L (the env's and the ledger's kernels alike), the last three:
-L_U0, L_IA, L_IB = 5, 6, 7  # of an edge cell, its content at the start of the sub-step and
-                 # its unclipped integral over it, IA + IB s (``_edge_impulse``)
-N_LCOL_LEDGER = 8
+L_QLIM = 1       # an edge cell's friction limit per unit overlap (mu E*/G* times the mean uN
+                 # over its part in contact; 0: none in contact), the mean of its values at
+                 # the sub-step's start and end: the slip work's limit
+L_U0, L_IA, L_IB = 2, 3, 4  # of an edge cell, its content at the start of the sub-step and
+                 # its unclipped integral over it, IA + IB s (the wear's trailing-edge term,
+                 # ``_edge_dissipation``, and the ledger's ``_edge_impulse``)
+N_LCOL = 5
 
 
 def work_rows(finite_mu: bool, ledger: bool = True) -> int:
-    """Rows of the work array W: U, A, B and, with finite friction, the rows of L: N_LCOL
-    without the energy ledger (the env), N_LCOL_LEDGER with it."""
-    return W_L + ((N_LCOL_LEDGER if ledger else N_LCOL) if finite_mu else 0)
+    """Rows of the work array W: U, A, B and, with finite friction, the N_LCOL rows of L (the
+    same with the energy ledger and without: ``ledger`` is kept for the callers that say
+    which they build)."""
+    return W_L + (N_LCOL if finite_mu else 0)
 
 # params vector
 P_R = 0
@@ -1020,6 +1021,21 @@ def _blend(th2, tr2):
 
 
 @njit(inline="always", **JIT)
+def _blended(lam, vlin, v0, dt):
+    """(vref, h) of the runner equation g(vb) = mass (vb - vref) - h (T + F - lam f1) = 0 at
+    blend weight ``lam`` (``_blend``): the exact piece's mean velocity ``vlin`` and h = dt/2
+    (the force beyond the piece a trapezoid) at lam = 1, backward Euler's v0 and dt at 0."""
+    return lam * vlin + (1.0 - lam) * v0, (1.0 - 0.5 * lam) * dt
+
+
+@njit(inline="always", **JIT)
+def _end_velocity(lam, v1l, vb, vref, dt, h):
+    """The runner's end velocity at blend weight ``lam``: the exact piece's ``v1l`` plus the
+    momentum of the force beyond it, blended with backward Euler's (the mean velocity)."""
+    return lam * (v1l + (dt / h) * (vb - vref)) + (1.0 - lam) * vb
+
+
+@njit(inline="always", **JIT)
 def _runner_linear(mass, k, T0, Tf1, F, v0, dt):
     """Exact sub-step of a free runner (mass > 0) on a contact whose force is linear in its
     displacement xi over the sub-step: T = T0 + (Tf1 - T0) t / dt - k xi (Tf1: the force the
@@ -1200,9 +1216,6 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                     E1 += e1
                     E2 += e2
                 else:
-                    L[L_E0, i] = e0
-                    L[L_E1, i] = e1
-                    L[L_E2, i] = e2
                     L[L_U0, i] = U[i]
                     L[L_IA, i] = IA
                     L[L_IB, i] = IB
@@ -1231,7 +1244,7 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
         # oscillator forced by a ramp, propagated exactly (``_runner_linear``); with friction
         # a step that crosses a kink of the force law solves g(vb) = mass (vb - vref) -
         # h (T(s0 - vb) + Fs) = 0 (monotone), exact on the piece and a trapezoid in the
-        # force beyond it (``_solve_bracketed`` with h = dt/2)
+        # force beyond it (``_solve_runner`` with h = dt/2)
         fast = True
         vref = v0
         Fs = F
@@ -1255,11 +1268,10 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                 if 0.0 < lam < 1.0:
                     # the blended equation of the finite-friction step below, on a linear
                     # force law (so that friction that never acts gives the same runner)
-                    vref = lam * vb + (1.0 - lam) * v0
-                    h = (1.0 - 0.5 * lam) * dt
+                    vref, h = _blended(lam, vb, v0, dt)
                     v1l = v1
                     vb = (mass * vref + h * (SA + SB * s0 + F - lam * f1)) / (mass + h * SB)
-                    v1 = lam * (v1l + (dt / h) * (vb - vref)) + (1.0 - lam) * vb
+                    v1 = _end_velocity(lam, v1l, vb, vref, dt, h)
             elif SB > 0.0:
                 vb = (SA + s0 * SB + F) / SB  # massless: T + F = 0 at the end
                 v1 = vb
@@ -1290,9 +1302,8 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                 # v0, h = dt, v1 = vb), which damps the unresolved ringing that crossing the
                 # force law's kinks excites instead of pumping it, and tends to the massless
                 # runner as the mass vanishes (``_blend``)
-                vref = lam * vref + (1.0 - lam) * v0
+                vref, h = _blended(lam, vref, v0, dt)
                 Fs = F - lam * f1
-                h = (1.0 - 0.5 * lam) * dt
                 vb = vref  # the root if the step stays on that piece (the commit checks)
             else:
                 h = 0.5 * dt
@@ -1396,7 +1407,7 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
             # (blended with backward Euler's, the mean); a massless runner's is its mean
             v1 = vb
             if mass > 0.0:
-                v1 = lam * (v1l + (dt / h) * (vb - vref)) + (1.0 - lam) * vb
+                v1 = _end_velocity(lam, v1l, vb, vref, dt, h)
         if last and mu is not None:
             stuck = _stuck_length(W, i0, i1, j0, j1, x_lo, dx, c1, a)
         xs += vb * dt  # the displacement: the integral of v* over the sub-step
@@ -1475,7 +1486,7 @@ def run_ticks(W, st, p, d, u, v, vs, mu, mass, load, n_sub, dt, out):
     """Run len(d) ticks with the energy ledger; out has shape (len(d), N_OUT).  Stops at the
     first error flag.  W must have ``work_rows(mu is not None)`` rows (the ledger writes rows
     an env's work array lacks: raises instead of writing past it)."""
-    if W.shape[0] < W_L + (N_LCOL_LEDGER if mu is not None else 0):
+    if W.shape[0] < W_L + (N_LCOL if mu is not None else 0):
         raise ValueError("run_ticks: the work array lacks the energy ledger's rows")
     for k in range(d.shape[0]):
         _tick(W, st, p, d[k], u[k], v[k], vs[k], mu, mass, load, n_sub, dt, out[k], True)

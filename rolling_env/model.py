@@ -149,8 +149,8 @@ class Drive(CellViews):
         Shift of the cells by this fraction of a cell (to measure grid-alignment effects).
     ledger : bool
         Keep the impulse and energy ledger (``Drive.run``, ``Drive.energy``; the default).
-        False for a drive that the env's kernel steps: it keeps none, and the work array has
-        none of the rows only the ledger reads (``_kernel.work_rows``).
+        False for a drive that the env's kernel steps: it keeps none (``Drive.run`` refuses
+        such a drive); the work array has the same rows either way (``_kernel.work_rows``).
     """
 
     def __init__(self, params: DriveParams, *, a_ref: float, resolution: float,

@@ -344,7 +344,7 @@ def test_ledger_impulse_in_steady_partial_slip(mu, bounds):
     cell takes its own integral (``_edge_impulse``: exact where it sticks or slides all through) and
     the inner cells at their limit the curvature term: with the inner cells corrected alone
     (fd98fb5) this measured 6.9e-4 / 4.3e-5 and 2.6e-3 / 1.9e-4, the trapezoid on T alone
-    8.3e-5 / 6.1e-6 and 6.9e-5 / 4.0e-6 (README, "Impulse and work with finite friction")."""
+    8.3e-5 / 6.1e-6 and 6.9e-5 / 4.0e-6 (docs/physics.md, "Impulse and work with finite friction")."""
     from rolling_env.model import Drive, DriveParams
     R, E, a1, tau = 1e-3, 115e9, 2e-5, 1e-3
     k, u, dt = 6, 5 * a1 / tau, tau / 8
@@ -720,7 +720,7 @@ def test_env_drive_refuses_drive_run_and_old_pickles_load():
     assert np.any(drv.U != 0.0), "no contact after a step"
     with pytest.raises(RuntimeError, match="without the energy ledger"):
         drv.run(dt_tick=1e-6, n_sub=4, omega_R=[0.1], v=[0.1], N=[0.5])
-    W, st, p = drv.cells[:K.W_L + 5].copy(), drv.st.copy(), drv._p
+    W, st, p = drv.cells[:K.W_L + 2].copy(), drv.st.copy(), drv._p
     with pytest.raises(ValueError, match="lacks the energy ledger's rows"):  # not past the rows
         K.run_ticks(W, st, p, np.array([0.1]), np.array([0.1]), np.array([0.1]), np.zeros(1),
                     0.3, 1.0, None, 4, 0.01, np.zeros((1, K.N_OUT)))
@@ -730,7 +730,7 @@ def test_env_drive_refuses_drive_run_and_old_pickles_load():
     own.U[:] = np.linspace(0.0, 1.0, own.U.size)
     state = pickle.loads(pickle.dumps(own)).__dict__.copy()  # as pickled before: a plain
     state["ledger"] = state.pop("_ledger")                  # attribute, fewer rows
-    state["cells"] = state["cells"][:K.W_L + 5]
+    state["cells"] = state["cells"][:K.W_L + 2]
     older = Drive.__new__(Drive)
     older.__setstate__(state)
     assert older.ledger and older.cells.shape[0] == K.work_rows(True), older.cells.shape
