@@ -25,7 +25,7 @@ from .model import Drive, DriveParams, check_n_sub
 from .scenes import _SPEC as SCENE_RANGES
 from .validation import check_int, check_range
 
-DEFAULT_RESOLUTION = 64.0  # springs per a1; chosen from results/work_precision.csv (README)
+DEFAULT_RESOLUTION = 64.0  # springs per a1; chosen from results/work_precision.csv (docs/numerical-quality.md)
 
 
 A_OVER_R_RANGE = (1e-6, 0.5)

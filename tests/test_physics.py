@@ -166,7 +166,7 @@ STIFF_R5_CONVERGED = 0.02003
 def test_resonant_band_exceeds_quasi_static_and_stiff_runner_collapses():
     """Mean velocity above Eq. 32 around omega_n/Omega ~ 0.5-1 (1.6 x Eq. 32 at 0.7), far
     below it for stiff runners, with partial revivals: at omega_n/Omega = 5 the converged
-    value is 0.02003 = 0.23 x Eq. 32 (0.049 / 0.057 / 0.17 x at 2 / 3 / 7, see README).
+    value is 0.02003 = 0.23 x Eq. 32 (0.049 / 0.057 / 0.17 x at 2 / 3 / 7, see docs/physics.md).
     The default sub-steps give it within their stated 1% (``experiments.STEP_TOL_REL``;
     measured 1e-5 relative); 40 sub-steps per runner period with a first-order runner step
     give 0.0141, 29% low, which looks like the collapse."""

@@ -16,7 +16,7 @@ def register(sub):
     p.add_argument("--resolution", type=finite_float("resolution", 2, 1e5),
                    default=ex.DEFAULT_RESOLUTION, help="springs per contact radius a1 "
                    f"(default {ex.DEFAULT_RESOLUTION:g}: below 0.1%% error where the back-step "
-                   "contact edge is resolved, see README)")
+                   "contact edge is resolved, see docs/physics.md)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_working_point)
 
