@@ -491,20 +491,30 @@ def action_noise(spec, n_actions: int = 3):
     return cls(np.zeros(n_actions), std * np.ones(n_actions))
 
 
-def make_vec_env(scene, n_envs: int, seed: int, env_kwargs: dict | None = None):
-    """The training vector env, chosen here and only here: the natively batched
-    ``rolling_env.vector.RollingDriveVecEnv`` (one compiled call steps all envs), wrapped in
-    ``VecMonitor``.  It is faster than SB3's ``DummyVecEnv`` of single envs at every batch size
-    (2x at 1 env, about 6x at 8: ``rolling-drive bench``, results/benchmarks.md), and
-    ``SubprocVecEnv`` is slower still on 2 cores (IPC dominates).  Env i is seeded ``seed + i``
-    like SB3's make_vec_env."""
-    from stable_baselines3.common.vec_env import VecMonitor
-
-    from rolling_env.sb3_vec import RollingDriveVecEnv
+def make_vec_env(scene, n_envs: int, seed: int, env_kwargs: dict | None = None,
+                 kind: str = "batched", num_threads=None):
+    """The training vector env, wrapped in ``VecMonitor``.  ``kind="batched"``: the natively
+    batched ``rolling_env.sb3_vec.RollingDriveVecEnv`` (one compiled call steps all envs;
+    ``num_threads`` as there: None picks the serial or threaded kernel step by step from
+    measured step times).  ``kind="dummy"``: SB3's ``DummyVecEnv`` of single envs.  Both give
+    the same transitions; which steps faster depends on the host (``rolling-drive bench``,
+    results/benchmarks.md: the batched env is 2-6x faster on an idle host), which is why
+    ``agents.train`` measures both at start.  ``SubprocVecEnv`` is slower still on 2 cores
+    (IPC dominates).  Env i is seeded ``seed + i`` like SB3's make_vec_env."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
 
     kw = dict(env_kwargs or {})
     kw.pop("scene", None)
-    venv = VecMonitor(RollingDriveVecEnv(n_envs, scene=scene, **kw))
+    if kind == "batched":
+        from rolling_env.sb3_vec import RollingDriveVecEnv
+        venv = RollingDriveVecEnv(n_envs, scene=scene, num_threads=num_threads, **kw)
+    elif kind == "dummy":
+        import rolling_env
+        envs = [rolling_env.make(scene, **kw) for _ in range(n_envs)]
+        venv = DummyVecEnv([lambda e=e: e for e in envs])
+    else:
+        raise ValueError(f"kind must be 'batched' or 'dummy', got {kind!r}")
+    venv = VecMonitor(venv)
     venv.seed(seed)
     return venv
 

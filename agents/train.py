@@ -6,8 +6,9 @@ Hyper-parameters come from ``configs/hyperparams/<algo>.yml`` (RL Zoo format, ke
 The run folder (default ``runs/<scene key>/<algo>_seed<seed>``, ``common.scene_key``: the
 scene's name, a scene file's stem, or ``<stem>-<digest8>`` for a file named like a shipped
 scene with other content) keeps config.yml (with the scene's fields and digest), command.txt,
-meta.json (seed, package versions, env steps, wall time, git commit, thread settings), the
-TensorBoard log (tb/), the EvalCallback log (evaluations.npz) and best model, periodic
+meta.json (seed, package versions, env steps, wall time, git commit, thread settings, and
+the vector env trained on: ``--vec-env auto``, the default, measures the batched env and a
+DummyVecEnv of single envs for about a second and takes the faster), the TensorBoard log (tb/), the EvalCallback log (evaluations.npz) and best model, periodic
 checkpoints, and the final
 model.zip with model_vecnormalize.pkl beside it.  Every file is written atomically; Ctrl-C or
 SIGTERM saves a final checkpoint before exiting with 130 / 143 (128 + the signal).  A run
@@ -28,6 +29,7 @@ import re
 import shutil
 import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -85,6 +87,15 @@ def build_parser():
     p.add_argument("--checkpoint-freq", type=positive_int("checkpoint-freq", 1, 10**12),
                    default=50000, help="env steps between checkpoints")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--vec-env", choices=("auto",) + VEC_ENVS, default="auto",
+                   help="training vector env: the natively batched env, SB3's DummyVecEnv of "
+                   "single envs, or auto (default): whichever steps faster here, measured for "
+                   "about a second at start and recorded in meta.json (both give the same "
+                   "transitions)")
+    p.add_argument("--num-threads", type=num_threads_arg, default=None,
+                   help="numba threads of the batched env: auto (default: the serial or "
+                   "the threaded kernel, chosen step by step from measured step times) or "
+                   "1 (serial kernel) to NUMBA_NUM_THREADS")
     return p
 
 
@@ -106,12 +117,13 @@ class _AtomicCheckpoint:
         return Cb()
 
 
-def _eval_callback(eval_env, run: Path, eval_freq: int, n_episodes: int):
+def _eval_callback(eval_env, run: Path, eval_freq: int, n_episodes: int, on_eval=None):
     """SB3's EvalCallback with every file written atomically: it logs to a scratch folder
     (``run/.eval_scratch``, removed at the end) and after each evaluation the log is copied
     atomically to ``run/evaluations.npz``; a new best model is saved atomically as
     ``best_model.zip`` with the VecNormalize statistics of that moment beside it
-    (``best_model_vecnormalize.pkl``: the statistics it was selected with)."""
+    (``best_model_vecnormalize.pkl``: the statistics it was selected with).  ``on_eval``,
+    if given, is called after each evaluation with (env steps, mean eval reward)."""
     from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
     scratch = run / ".eval_scratch"
@@ -127,6 +139,8 @@ def _eval_callback(eval_env, run: Path, eval_freq: int, n_episodes: int):
             if src.exists():
                 atomic_write(run / "evaluations.npz",
                              lambda p: Path(p).write_bytes(src.read_bytes()))
+            if on_eval is not None:
+                on_eval(int(self.num_timesteps), float(self.parent.last_mean_reward))
             return True
 
     return EvalCallback(eval_env, best_model_save_path=None, log_path=str(scratch),
@@ -138,7 +152,69 @@ class UsageError(ValueError):
     """A bad scene, hyper-parameter or argument, found before training starts."""
 
 
-def _setup(args):
+VEC_ENVS = ("batched", "dummy")  # the kinds of common.make_vec_env
+
+
+def num_threads_arg(text):
+    """argparse type of --num-threads: 'auto' (None) or an integer in [1, NUMBA_NUM_THREADS]."""
+    from rolling_env.vector import max_threads
+    hi = max_threads()
+    if text == "auto":
+        return None
+    try:
+        x = int(text)
+    except ValueError:
+        x = 0
+    if not 1 <= x <= hi:
+        raise argparse.ArgumentTypeError(f"num-threads must be 'auto' or an integer in "
+                                         f"[1, {hi}], got {text!r}")
+    return x
+
+
+def measure_vec_envs(scene, n_envs: int, env_kwargs, num_threads=None, seconds=1.0,
+                     rounds=3) -> dict:
+    """Env steps/s of each kind of training vector env (``VEC_ENVS``) here and now: random
+    actions, timed passes of the kinds in turn (``rounds`` rounds, ``seconds`` in all), the
+    best pass of each counting.  The batched env's own thread choice settles in the untimed
+    warm-up."""
+    import numpy as np
+    acts = np.random.default_rng(0).uniform(-1, 1, (64, n_envs, 3)).astype(np.float32)
+    envs = {k: make_vec_env(scene, n_envs, 0, env_kwargs, kind=k, num_threads=num_threads)
+            for k in VEC_ENVS}
+    best = dict.fromkeys(envs, 0.0)
+    try:
+        for env in envs.values():
+            env.reset()
+            for a in acts[:32]:
+                env.step(a)
+        span = seconds / (rounds * len(envs))
+        for _ in range(rounds):
+            for k, env in envs.items():
+                steps, t0 = 0, time.perf_counter()
+                while (t := time.perf_counter() - t0) < span:
+                    env.step(acts[steps % len(acts)])
+                    steps += 1
+                best[k] = max(best[k], steps * n_envs / t)
+    finally:
+        for env in envs.values():
+            env.close()
+    return best
+
+
+def choose_vec_env(flag: str, scene, n_envs: int, env_kwargs, num_threads=None,
+                   measure=measure_vec_envs):
+    """The training vector env's kind and what decided it: ``flag`` ("auto" or one of
+    ``VEC_ENVS``); for "auto" the faster of ``measure(scene, n_envs, env_kwargs,
+    num_threads)`` (env steps/s per kind).  Returns (kind, record for meta.json)."""
+    if flag != "auto":
+        return flag, {"kind": flag, "chosen_by": "--vec-env"}
+    rates = measure(scene, n_envs, env_kwargs, num_threads)
+    kind = max(VEC_ENVS, key=lambda k: rates[k])
+    return kind, {"kind": kind, "chosen_by": "measured at start",
+                  "env_steps_per_s": {k: round(rates[k]) for k in VEC_ENVS}}
+
+
+def _setup(args, command=None):
     """Hyper-parameters, envs (the scene checked) and the model; then the run folder with its
     config, so that a bad scene or hyper-parameter leaves nothing behind."""
     import stable_baselines3 as sb3
@@ -160,10 +236,14 @@ def _setup(args):
     env_kwargs = checked["env_kwargs"]
     set_random_seed(args.seed)
     try:
-        env = make_vec_env(scene, n_envs, args.seed, env_kwargs)
+        kind, vec_env = choose_vec_env(args.vec_env, scene, n_envs, env_kwargs,
+                                       args.num_threads)
+        env = make_vec_env(scene, n_envs, args.seed, env_kwargs, kind=kind,
+                           num_threads=args.num_threads)
     except ValueError as e:  # scene overrides in env_kwargs
         raise ValueError(f"hyper-parameter 'env_kwargs': {e}") from None
-    trained = env.venv.core.scene  # with the overrides of env_kwargs applied
+    trained = env.get_attr("scene", [0])[0]  # with the overrides of env_kwargs applied
+    vec_env["num_threads"] = "auto" if args.num_threads is None else args.num_threads
     check_policy(args.algo, checked["kwargs"], env)  # torch's errors named policy_kwargs
     eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs)
     run = Path(args.run_dir or f"runs/{key}/{args.algo}_seed{args.seed}")
@@ -206,8 +286,9 @@ def _setup(args):
                seed=args.seed, env_kwargs=dict(env_kwargs, scene=str(scene)), scene_key=key,
                scene_digest=scene_digest(trained), scene_fields=scene_fields(trained))
     atomic_write(work / "config.yml", lambda p: Path(p).write_text(yaml.safe_dump(cfg)))
-    atomic_write(work / "command.txt", lambda p: Path(p).write_text(" ".join(sys.argv) + "\n"))
-    return model, eval_env, run, work, n_envs, n_timesteps, trained
+    command = command or " ".join(sys.argv)
+    atomic_write(work / "command.txt", lambda p: Path(p).write_text(command + "\n"))
+    return model, eval_env, run, work, n_envs, n_timesteps, trained, vec_env
 
 
 def staging_folder(run: Path) -> Path:
@@ -290,7 +371,13 @@ def _not_a_run(run: Path) -> str:
     return ""
 
 
-def train(args) -> Path:
+def train(args, *, command: str | None = None, on_eval=None) -> Path:
+    """Train as the command line ``args`` (``build_parser().parse_args``) say and return the
+    run folder.  ``command``: what command.txt records (default: this process's argv; a
+    caller that trains in-process passes the equivalent ``agents.train`` command).
+    ``on_eval(env_steps, mean_reward)`` is called after each periodic evaluation.  Ctrl-C and
+    SIGTERM save a checkpoint (``Interrupted``) where this runs in the main thread; in another
+    thread the caller handles signals."""
     import stable_baselines3 as sb3
     import torch
     from stable_baselines3.common.callbacks import CallbackList
@@ -299,7 +386,8 @@ def train(args) -> Path:
 
     torch.set_num_threads(1)
     try:  # an error while learning is not a usage error: it propagates with its traceback
-        model, eval_env, run, work, n_envs, n_timesteps, trained = _setup(args)
+        model, eval_env, run, work, n_envs, n_timesteps, trained, vec_env = _setup(args,
+                                                                                  command)
     except KeyError as e:
         raise UsageError(f"hyper-parameter {e.args[0]!r} missing from "
                          f"{args.conf or 'configs/hyperparams'}") from e
@@ -309,7 +397,8 @@ def train(args) -> Path:
                          else str(e)) from e
     scene = args.scene
     callbacks = CallbackList([
-        _eval_callback(eval_env, work, max(args.eval_freq // n_envs, 1), args.eval_episodes),
+        _eval_callback(eval_env, work, max(args.eval_freq // n_envs, 1), args.eval_episodes,
+                       on_eval),
         _AtomicCheckpoint.make(work, max(args.checkpoint_freq, 1)),
     ])
 
@@ -318,7 +407,8 @@ def train(args) -> Path:
     def on_term(signum, frame):
         received.append(signum)
         raise KeyboardInterrupt
-    old = signal.signal(signal.SIGTERM, on_term)
+    main_thread = threading.current_thread() is threading.main_thread()
+    old = signal.signal(signal.SIGTERM, on_term) if main_thread else None  # main thread only
     t0 = time.perf_counter()
     interrupted = False
     try:
@@ -332,7 +422,8 @@ def train(args) -> Path:
                   f"run's files are in {str(work)!r}", file=sys.stderr)
         raise
     finally:
-        signal.signal(signal.SIGTERM, old)
+        if main_thread:
+            signal.signal(signal.SIGTERM, old)
         shutil.rmtree(work / ".eval_scratch", ignore_errors=True)
     wall = time.perf_counter() - t0
     save_model(model, model.get_vec_normalize_env(), work,
@@ -346,6 +437,7 @@ def train(args) -> Path:
         "torch": torch.__version__, "python": platform.python_version(),
         "machine": f"{platform.machine()}, {os.cpu_count()} CPU cores, no GPU",
         "commit": source_commit(), "threads": {k: os.environ.get(k) for k in THREAD_VARS},
+        "vec_env": vec_env,
     }
     atomic_write(work / "meta.json", lambda p: Path(p).write_text(json.dumps(meta, indent=1)))
     print(json.dumps(meta))

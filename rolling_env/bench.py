@@ -5,8 +5,12 @@
 * single env steps/s through ``gym.make`` vs Gymnasium's Pendulum-v1, measured the same way;
 * the naive plain-numpy spring row (tests/naive.py) at equal working-point accuracy;
 * scene specialisation: the scene's kernel vs the same kernel with every feature switched on;
-* batched env (256 envs) vs the single env, serial and threaded kernel, over batch sizes, and
-  through the Gymnasium and SB3 adapters; the SB3 training env vs a DummyVecEnv;
+* batched env (256 envs) vs the single env, serial and threaded kernel and the default
+  (threads chosen at run time), over batch sizes, and through the Gymnasium and SB3 adapters;
+  the SB3 training env vs a DummyVecEnv;
+* threads on a busy host: the batched env's default against the serial kernel on an idle
+  host, beside a competing busy process, with the Python thread's own work between steps,
+  and both; the host's own parallelism (two processes side by side);
 * start-up (warm and cold numba cache) and peak memory (1 env, 1024 batched envs).
 """
 from __future__ import annotations
@@ -63,6 +67,37 @@ def _best_rates(passes: dict, rounds=ROUNDS) -> dict:
     return best
 
 
+def _interleaved_rates(runs: dict, total: int, segment: int) -> dict:
+    """Env steps/s of each entry, the entries run in turn in segments of ``segment`` steps
+    until each has made ``total``: every entry meets the same stretches of the host's load,
+    and the rate counts all its steps (a choice made at run time pays for its probes).  On
+    a shared host whose load changes within seconds, the best passes of whole rounds gave
+    two entries running the same kernel rates 2x apart.  ``runs[name](k)`` makes the next k
+    steps and returns the env steps made."""
+    spent = dict.fromkeys(runs, 0.0)
+    made = dict.fromkeys(runs, 0)
+    for start in range(0, total, segment):
+        k = min(segment, total - start)
+        for name, run in runs.items():
+            t = time.perf_counter()
+            made[name] += run(k)
+            spent[name] += time.perf_counter() - t
+            time.sleep(SEGMENT_PAUSE)
+    return {name: made[name] / spent[name] for name in runs}
+
+
+# untimed pause after each segment: OpenMP's worker threads spin for some milliseconds after
+# a threaded step, and would slow the next entry's first steps (a neighbour that a user's
+# single env does not have)
+SEGMENT_PAUSE = 0.02
+
+
+def _segment(n_envs: int) -> int:
+    """Steps of one segment for ``_interleaved_rates``: about 16k env steps (0.1-0.3 s
+    here), long beside the switch from one entry to the next."""
+    return max(16, 16_384 // n_envs)
+
+
 def _env_pass(env, n, seed=0):
     """Timed pass of a single env: n steps of pre-sampled actions (resetting at episode
     ends), after a warm-up; returns steps/s per call."""
@@ -93,10 +128,9 @@ def env_vs_pendulum(n=50_000, scenes=None):
             for sc in scenes]
 
 
-def _core_pass(core, ticks, seed=0, threads=None):
+def _core_pass(core, ticks, seed=0):
     """Timed pass of a BatchCore on random actions (truncated envs reset as they end), after a
-    warm-up; returns (env steps/s, cell updates/s) per call.  ``threads``: numba threads for
-    the pass (restored after it)."""
+    warm-up; returns (env steps/s, cell updates/s) per call."""
     acts = np.random.default_rng(seed).uniform(-1, 1, (ticks, core.num_envs, 3))
     sc = core.scene
     N = sc.N_min + 0.5 * (acts[..., 0] + 1) * (sc.N_max - sc.N_min)
@@ -108,20 +142,53 @@ def _core_pass(core, ticks, seed=0, threads=None):
         core.step(a)
 
     def run_pass():
-        import numba
-        before = numba.get_num_threads()
-        numba.set_num_threads(threads or before)
-        try:
-            t = time.perf_counter()
-            for a in acts:
-                _, _, tr = core.step(a)
-                if np.count_nonzero(tr):  # a quarter of the time of tr.any() for 256 envs
-                    core.reset(tr)
-            dt = time.perf_counter() - t
-        finally:
-            numba.set_num_threads(before)
+        t = time.perf_counter()
+        for a in acts:
+            _, _, tr = core.step(a)
+            if np.count_nonzero(tr):  # a quarter of the time of tr.any() for 256 envs
+                core.reset(tr)
+        dt = time.perf_counter() - t
         return ticks * core.num_envs / dt, cells * sc.n_sub / dt
     return run_pass
+
+
+def _core_runner(core, ticks, seed=0):
+    """A BatchCore's steps in segments (for ``_interleaved_rates``): ``run(k)`` makes the next
+    k ticks of ``ticks`` random actions taken in a cycle (truncated envs reset as they end),
+    after a warm-up."""
+    acts = np.random.default_rng(seed).uniform(-1, 1, (ticks, core.num_envs, 3))
+    core.seed(seed)
+    core.reset()
+    for a in acts[:20]:
+        core.step(a)
+    at = [0]
+
+    def run(k):
+        for _ in range(k):
+            _, _, tr = core.step(acts[at[0]])
+            if np.count_nonzero(tr):
+                core.reset(tr)
+            at[0] = (at[0] + 1) % ticks
+        return k * core.num_envs
+    return run
+
+
+def _vec_runner(step, n_envs, ticks, seed=0, between=None):
+    """A vector env adapter's steps in segments (for ``_interleaved_rates``), as
+    ``_vec_pass`` takes them (``between``: the calling thread's work after each step)."""
+    acts = np.random.default_rng(seed).uniform(-1, 1, (ticks, n_envs, 3)).astype(np.float32)
+    for a in acts[:20]:
+        step(a)
+    at = [0]
+
+    def run(k):
+        for _ in range(k):
+            r = step(acts[at[0]])
+            if between is not None:
+                between(r)
+            at[0] = (at[0] + 1) % ticks
+        return k * n_envs
+    return run
 
 
 def _steps(run_pass):
@@ -129,17 +196,22 @@ def _steps(run_pass):
     return lambda: run_pass()[0]
 
 
-def _vec_pass(step, n_envs, ticks, seed=0):
+def _vec_pass(step, n_envs, ticks, seed=0, between=None):
     """Timed pass of a vector env adapter (``step(actions)``), after a warm-up; returns
-    aggregate env steps/s per call."""
+    aggregate env steps/s per call.  ``between``: work of the calling thread after each step
+    (called with the step's result)."""
     acts = np.random.default_rng(seed).uniform(-1, 1, (ticks, n_envs, 3)).astype(np.float32)
     for a in acts[:20]:
         step(a)
 
     def run_pass():
         t = time.perf_counter()
-        for a in acts:
-            step(a)
+        if between is None:
+            for a in acts:
+                step(a)
+        else:
+            for a in acts:
+                between(step(a))
         return ticks * n_envs / (time.perf_counter() - t)
     return run_pass
 
@@ -156,13 +228,11 @@ def _limit(finite_mu: bool) -> float:
 
 def kernel_throughput(ticks=20_000, scenes=None):
     import rolling_env
-    from . import _envkernel as EK
     from .vector import BatchCore
     rows = []
     for sc in scenes or rolling_env.list_scenes():
-        core = BatchCore(64, scene=sc)
+        core = BatchCore(64, scene=sc, num_threads=1)  # the serial kernel
         limit = _limit(math.isfinite(core.scene.mu))
-        core._step_fn = EK.env_step_serial
         run_pass = _core_pass(core, max(ticks // 64, 50))
         steps, cells = max(run_pass() for _ in range(ROUNDS))
         rows.append(dict(scene=sc, cell_updates_per_s=cells, limit=limit, fraction=cells / limit,
@@ -204,14 +274,12 @@ def specialisation(ticks=300, scenes=None):
     from .vector import BatchCore
     rows = []
     for sc in scenes or rolling_env.list_scenes():
-        spec = BatchCore(64, scene=sc)
-        full = BatchCore(64, scene=sc)
+        spec = BatchCore(64, scene=sc, num_threads=1)  # both on the serial kernel
+        full = BatchCore(64, scene=sc, num_threads=1)
         mu, mass, load, _ = full.features
         full.features = (1e30 if mu is None else mu, mass, 0.0 if load is None else load, True)
         if full.cells.shape[1] < K.work_rows(True):  # infinite friction: no friction rows
             full.cells = np.zeros((full.num_envs, K.work_rows(True), full.cells.shape[2]))
-        for c in (spec, full):
-            c._step_fn = __import__("rolling_env._envkernel", fromlist=["x"]).env_step_serial
         r = _best_rates({"spec": _steps(_core_pass(spec, ticks)),
                          "full": _steps(_core_pass(full, ticks))})
         r_spec, r_full = r["spec"], r["full"]
@@ -232,34 +300,42 @@ def _whole_episodes(ticks: int, episode: int) -> int:
     return episode * max(1, -(-ticks // episode))
 
 
-BATCH_SIZES = (1, 2, 4, 6, 8, 16, 64, 256)  # the table of where prange pays
+BATCH_SIZES = (1, 2, 4, 6, 8, 16, 64, 256, 1024)  # the table of where prange pays
 
 
 def batched(n_envs=256, ticks=200, single_steps=20_000, sizes=BATCH_SIZES):
-    """Aggregate steps/s of the batched core, serial and threaded kernel, over batch sizes
-    (where prange pays), and at ``n_envs`` against the single env (``gym.make``, default
-    scene, ``single_steps`` per pass) measured in the same rounds: the threaded kernel on all
-    threads and on one, and the two adapters, Gymnasium's ``gym.make_vec`` (NEXT_STEP
-    autoreset) and the SB3 ``VecEnv`` (same-step)."""
-    import gymnasium as gym
-    import numba
+    """Aggregate steps/s of the batched core, serial and threaded kernel (all threads) and
+    the default (``num_threads=None``: chosen at run time), over batch sizes (where prange
+    pays), and at ``n_envs`` against the single env (``gym.make``, default scene,
+    ``single_steps`` per pass) measured in the same rounds: the threaded kernel on all threads
+    and on one, the default, and the two adapters, Gymnasium's ``gym.make_vec`` (NEXT_STEP
+    autoreset) and the SB3 ``VecEnv`` (same-step), both with their defaults."""
+    from functools import partial
 
-    from . import _envkernel as EK
+    import gymnasium as gym
+
     from .sb3_vec import RollingDriveVecEnv
     from .scenes import load_scene
-    from .vector import BatchCore
+    from .vector import BatchCore, _threaded_step, max_threads
 
     episode = load_scene().episode_steps  # the default scene's
+    most = max_threads()
 
-    def core(n, fn, threads=None):
-        c = BatchCore(n)
-        c._step_fn = fn
-        return _steps(_core_pass(c, _whole_episodes(max(ticks, 20_000 // n), episode),
-                                 threads=threads))
+    def core(n, num_threads, step_fn=None):
+        c = BatchCore(n, num_threads=num_threads)
+        if step_fn is not None:
+            c._step_fn = step_fn
+        return _steps(_core_pass(c, _whole_episodes(max(ticks, 20_000 // n), episode)))
 
-    sweep = [dict(num_envs=n, **_best_rates({"serial": core(n, EK.env_step_serial),
-                                             "threaded": core(n, EK.env_step_parallel)}))
-             for n in sizes]
+    def runs(n):
+        t = _whole_episodes(max(ticks, 20_000 // n), episode)
+        return {name: _core_runner(BatchCore(n, num_threads=k), t)
+                for name, k in (("serial", 1), ("threaded", most), ("default", None))}, t
+
+    sweep = []
+    for n in sizes:
+        r, t = runs(n)
+        sweep.append(dict(num_envs=n, **_interleaved_rates(r, ROUNDS * t, _segment(n))))
     genv = gym.make_vec("RollingDrive-v0", num_envs=n_envs)
     genv.reset(seed=0)
     venv = RollingDriveVecEnv(n_envs)
@@ -267,15 +343,16 @@ def batched(n_envs=256, ticks=200, single_steps=20_000, sizes=BATCH_SIZES):
     venv.reset()
     out = _best_rates({
         "single": _env_pass(gym.make("RollingDrive-v0"), single_steps),
-        "serial": core(n_envs, EK.env_step_serial),
-        "threaded": core(n_envs, EK.env_step_parallel),
+        "serial": core(n_envs, 1),
+        "threaded": core(n_envs, most),
         # the prange kernel on one thread: separates what the threads give from what the
         # parallel kernel's different generated code gives
-        "threaded_1": core(n_envs, EK.env_step_parallel, threads=1),
+        "threaded_1": core(n_envs, 1, partial(_threaded_step, 1)),
+        "default": core(n_envs, None),
         "gym_vector": _vec_pass(genv.step, n_envs, _whole_episodes(ticks, episode)),
         "sb3_vecenv": _vec_pass(venv.step, n_envs, _whole_episodes(ticks, episode))},
         TOP_ROUNDS)
-    out.update(sweep=sweep, num_envs=n_envs, threads=numba.get_num_threads())
+    out.update(sweep=sweep, num_envs=n_envs, threads=most)
     return out
 
 
@@ -301,6 +378,185 @@ def sb3_training_env(sizes=(1, 8, 256), ticks=2000):
                                                                     episode))
         rows.append(dict(num_envs=n, **_best_rates(passes)))
     return rows
+
+
+# ----------------------------------------------------------------- threads on a busy host
+LOAD_CONDITIONS = ("idle", "busy", "work", "busy+work")
+# the competing process: one core's worth of pure Python, until its parent is gone (a
+# benchmark killed before it could stop it leaves no busy process behind)
+BUSY_CODE = "import os\nparent = os.getppid()\nwhile os.getppid() == parent:\n    pass\n"
+
+
+class _Competitor:
+    """A busy process for the duration of a ``with`` block (``busy`` False: none): a Python
+    loop that keeps one core busy, as another user's job would; killed at the end."""
+
+    def __init__(self, busy: bool):
+        self.busy = busy
+        self.proc = None
+
+    def __enter__(self):
+        if self.busy:
+            self.proc = subprocess.Popen([sys.executable, "-c", BUSY_CODE])
+            time.sleep(0.3)  # running before the first timed pass
+        return self
+
+    def __exit__(self, *exc):
+        if self.proc is not None:
+            self.proc.kill()
+            self.proc.wait()
+        return False
+
+
+def _policy_work(n_envs: int, seconds: float):
+    """Work of the calling thread between steps, as a policy's forward pass would do: a
+    (n_envs, 64) layer of element-wise numpy (one thread: no BLAS threads of its own), its
+    repetitions chosen to take about ``seconds`` on this host now.  Returns (work(result),
+    seconds of one call as measured)."""
+    h = np.empty((n_envs, 64))
+    w = np.linspace(-1.0, 1.0, 64)
+
+    def layer(obs):
+        np.multiply(obs[:, :1], w, out=h)
+        np.tanh(h, out=h)
+
+    obs = np.zeros((n_envs, 13), dtype=np.float32)
+    one = min(_time_once(lambda: layer(obs)) for _ in range(20))
+    reps = max(1, round(seconds / one))
+
+    def work(result):
+        o = result[0]
+        for _ in range(reps):
+            layer(o)
+    return work, reps * one
+
+
+def _load_average() -> float:
+    """The host's 1-minute load average (this process included; nan where the OS does not
+    say): what else was running when a condition started."""
+    try:
+        return os.getloadavg()[0]
+    except (AttributeError, OSError):
+        return math.nan
+
+
+def _time_once(fn) -> float:
+    t = time.perf_counter()
+    fn()
+    return time.perf_counter() - t
+
+
+def threads_under_load(n_envs=256, ticks=200, sb3_envs=8, sb3_ticks=2000,
+                       conditions=LOAD_CONDITIONS):
+    """``gym.make_vec("RollingDrive-v0", num_envs=n_envs)`` with its default threading
+    (``num_threads=None``) against the same env on the serial kernel (``num_threads=1``) and
+    on all threads, in each condition: ``idle`` (nothing else of ours running), ``busy`` (a
+    competing busy process, ``BUSY_CODE``), ``work`` (the calling thread does a policy's
+    worth of numpy between steps, about as long as a serial step) and ``busy+work``.  The
+    same three envs run through all conditions in turn, so the default must follow the
+    load as it changes.  In the conditions without work, also the SB3 training env at
+    ``sb3_envs`` envs: the batched ``RollingDriveVecEnv`` (default threading) vs a
+    ``DummyVecEnv`` of single envs, both in ``VecMonitor``."""
+    import gymnasium as gym
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
+
+    import rolling_env
+    from .sb3_vec import RollingDriveVecEnv
+    from .scenes import load_scene
+    from .vector import max_threads
+
+    episode = load_scene().episode_steps  # the default scene's
+    most = max_threads()
+    envs = {}
+    for name, k in (("serial", 1), ("threads", most), ("default", None)):
+        envs[name] = gym.make_vec("RollingDrive-v0", num_envs=n_envs, num_threads=k)
+        envs[name].reset(seed=0)
+    ticks = _whole_episodes(ticks, episode)
+    step_s = n_envs / _vec_pass(envs["serial"].step, n_envs, ticks)()
+    work, work_s = _policy_work(n_envs, step_s)
+    sb3 = {"batched": VecMonitor(RollingDriveVecEnv(sb3_envs)),
+           "dummy": VecMonitor(DummyVecEnv([lambda: rolling_env.make("default")
+                                            for _ in range(sb3_envs)]))}
+    for venv in sb3.values():
+        venv.seed(0)
+        venv.reset()
+    sb3_ticks = _whole_episodes(max(sb3_ticks // sb3_envs, 200), episode)
+    rows = []
+    for cond in conditions:
+        between = work if "work" in cond else None
+        load = _load_average()
+        with _Competitor("busy" in cond):
+            r = _interleaved_rates({name: _vec_runner(e.step, n_envs, ticks, between=between)
+                                    for name, e in envs.items()},
+                                   TOP_ROUNDS * ticks, _segment(n_envs))
+            row = dict(condition=cond, **r, load_average=load,
+                       default_threads=envs["default"].unwrapped.core.threads)
+            if between is None:
+                s3 = _interleaved_rates({name: _vec_runner(v.step, sb3_envs, sb3_ticks)
+                                         for name, v in sb3.items()},
+                                        TOP_ROUNDS * sb3_ticks, _segment(sb3_envs))
+                row.update(sb3_batched=s3["batched"], sb3_dummy=s3["dummy"])
+        rows.append(row)
+    for e in envs.values():
+        e.close()
+    return dict(num_envs=n_envs, threads=most, sb3_envs=sb3_envs, work_seconds=work_s,
+                serial_step_seconds=step_s, rows=rows)
+
+
+_WORKER = """
+import sys, time
+import numpy as np
+from rolling_env.vector import BatchCore
+n, ticks = {n}, {ticks}
+core = BatchCore(n, num_threads=1)
+core.seed(0)
+core.reset()
+acts = np.random.default_rng(0).uniform(-1, 1, (ticks, n, 3))
+def run():
+    t = time.perf_counter()
+    for a in acts:
+        _, _, tr = core.step(a)
+        if np.count_nonzero(tr):
+            core.reset(tr)
+    return ticks * n / (time.perf_counter() - t)
+run()
+print("ready", flush=True)
+for line in sys.stdin:
+    if line.strip() != "go":
+        break
+    print(run(), flush=True)
+"""
+
+
+def host_parallelism(n_envs=256, ticks=512, rounds=TOP_ROUNDS):
+    """What the host's second core gives two independent processes: two worker processes
+    step the serial kernel (``n_envs`` envs, ``ticks`` ticks a pass); in each round one of
+    them (each in turn) runs a pass alone, then both at once.  Returns the best rate alone, the best sum of the pair
+    and their ratio (2 on an idle 2-core host; what threads can reach at most)."""
+    code = _WORKER.format(n=n_envs, ticks=ticks)
+    procs = [subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True) for _ in range(2)]
+    try:
+        for p in procs:
+            if p.stdout.readline().strip() != "ready":
+                raise RuntimeError("a benchmark worker process failed to start")
+
+        def go(ps):
+            for p in ps:
+                p.stdin.write("go\n")
+                p.stdin.flush()
+            return [float(p.stdout.readline()) for p in ps]
+        alone = pair = 0.0
+        for r in range(rounds):  # each worker alone in turn, then both
+            alone = max(alone, go(procs[r % 2:r % 2 + 1])[0])
+            time.sleep(SEGMENT_PAUSE)
+            pair = max(pair, sum(go(procs)))
+            time.sleep(SEGMENT_PAUSE)
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()
+    return dict(num_envs=n_envs, alone=alone, pair=pair, ratio=pair / alone)
 
 
 _NAIVE_BURST = 4     # back-to-back calls of a kernel in one pass of the naive comparison
@@ -415,6 +671,8 @@ def run(quick=False) -> dict:
                              10_000 if quick else 20_000,
                              (1, 64) if quick else BATCH_SIZES)
     res["sb3"] = sb3_training_env((1, 8) if quick else (1, 8, 256))
+    res["load"] = threads_under_load(64 if quick else 256)
+    res["host"] = host_parallelism(64 if quick else 256)
     res["naive"] = naive_equal_accuracy()
     res["startup"] = startup_and_memory()
     return res
@@ -480,15 +738,23 @@ def report(res) -> str:
           f"{b['threaded_1'] / b['single']:.2f}x |",
           f"| batched core, threaded kernel (prange, {b['threads']} threads) | "
           f"{b['threaded']:,.0f} | {b['threaded'] / b['single']:.2f}x |",
+          f"| batched core, default (threads chosen at run time) | {b['default']:,.0f} | "
+          f"{b['default'] / b['single']:.2f}x |",
           f"| `gym.make_vec(\"RollingDrive-v0\", num_envs={n})` | {b['gym_vector']:,.0f} | "
           f"{b['gym_vector'] / b['single']:.2f}x |",
           f"| SB3 `RollingDriveVecEnv({n})` | {b['sb3_vecenv']:,.0f} | "
           f"{b['sb3_vecenv'] / b['single']:.2f}x |",
-          "", "Where prange pays (batched core, aggregate env steps/s):", "",
-          "| envs | serial kernel | threaded kernel | threaded / serial |", "|---|---|---|---|"]
+          "", "Where prange pays (batched core, aggregate env steps/s; the default picks the "
+          "serial or the threaded kernel step by step from measured step times; the three "
+          f"taken in turn in segments of about 16k env steps until each has made {ROUNDS} "
+          "passes' worth, all steps over all their time):", "",
+          "| envs | serial kernel | threaded kernel | threaded / serial | default | "
+          "default / serial |", "|---|---|---|---|---|---|"]
     L += [f"| {r['num_envs']} | {r['serial']:,.0f} | {r['threaded']:,.0f} | "
-          f"{r['threaded'] / r['serial']:.2f} |" for r in b["sweep"]]
-    L += ["", f"The batched env uses the threaded kernel from {_parallel_min()} envs on.  At "
+          f"{r['threaded'] / r['serial']:.2f} | {r['default']:,.0f} | "
+          f"{r['default'] / r['serial']:.2f} |" for r in b["sweep"]]
+    L += ["", f"By default the batched env measures both kernels from {_parallel_min()} envs on "
+          f"(below, the serial kernel only).  At "
           f"{n} envs the threads give {b['threaded'] / b['threaded_1']:.2f}x over the same "
           f"kernel on one thread; the rest of the threaded / serial ratio "
           f"({b['threaded_1'] / b['serial']:.2f}x) is the prange kernel's different generated "
@@ -497,10 +763,12 @@ def report(res) -> str:
     if res.get("sb3"):
         L += ["", "## Training env (SB3, default scene, both in VecMonitor, passes of whole "
               "episodes)", "",
-              "| envs | RollingDriveVecEnv (batched, used by agents.train) | DummyVecEnv of "
+              "| envs | RollingDriveVecEnv (batched) | DummyVecEnv of "
               "single envs | ratio |", "|---|---|---|---|"]
         L += [f"| {r['num_envs']} | {r['batched']:,.0f} | {r['dummy']:,.0f} | "
               f"{r['batched'] / r['dummy']:.1f}x |" for r in res["sb3"]]
+    if res.get("load"):
+        L += ["", *_load_section(res["load"], res.get("host"), res["batched"])]
     n = res["naive"]
     if n:
         L += ["", "## Naive plain-numpy spring row at equal accuracy (working point 0.7, 0.1, 2.5)",
@@ -573,6 +841,57 @@ def _ratio_bound(b) -> list:
                "fast at the same accuracy (a faster tick also speeds up the single env); with "
                "perfect scaling it would need "
                + (f"{f:.2f}x." if f > 1.0 else "none (the bound is above it)."))]
+
+
+def _load_section(ld, host, b) -> list:
+    """The report's section on threads under load (``threads_under_load``,
+    ``host_parallelism`` and the idle gains of ``batched``'s sweep)."""
+    n, k = ld["num_envs"], ld["threads"]
+    names = {"idle": "idle (nothing else of ours running)",
+             "busy": "a competing busy process (a pure-Python loop on one core)",
+             "work": "the calling thread's own work between steps",
+             "busy+work": "both"}
+    L = [f"## Threads on a busy host (`gym.make_vec`, {n} envs, default scene)", "",
+         "The same three envs in every condition, taken in turn in segments of "
+         f"{_segment(n)} steps until each has made {TOP_ROUNDS} episodes (rates: all steps "
+         "over all their time, so each env meets the same stretches of the host's load and "
+         "the default pays for its probes): the serial kernel (`num_threads=1`), "
+         f"the threaded kernel on {k} threads (`num_threads={k}`) and the default "
+         "(`num_threads=None`), which picks between them step by step from measured step "
+         "times and must follow each change of load.  The work between steps is a policy's "
+         f"worth of element-wise numpy, {ld['work_seconds'] * 1e3:.2f} ms a step (about a "
+         f"serial step, {ld['serial_step_seconds'] * 1e3:.2f} ms, when measured).", "",
+         "| condition | serial kernel | threaded kernel | default | default / serial | "
+         "threaded / serial | default ended on | load average |",
+         "|---|---|---|---|---|---|---|---|"]
+    L += [f"| {names.get(r['condition'], r['condition'])} | {r['serial']:,.0f} | "
+          f"{r['threads']:,.0f} | {r['default']:,.0f} | {r['default'] / r['serial']:.2f} | "
+          f"{r['threads'] / r['serial']:.2f} | "
+          + ("the serial kernel" if r["default_threads"] == 1 else
+             f"{r['default_threads']} threads") + f" | {r.get('load_average', math.nan):.1f} |"
+          for r in ld["rows"]]
+    L += ["", "Load average: the host's 1-minute load average when the condition started, "
+          "this benchmark included (other users' work on a shared host shows here)."]
+    sb = [r for r in ld["rows"] if "sb3_batched" in r]
+    if sb:
+        L += ["", f"The SB3 training env at {ld['sb3_envs']} envs (both in VecMonitor, taken "
+              "in turn in the same way; `agents.train` measures the two at start and trains "
+              "on the faster):", "",
+              "| condition | RollingDriveVecEnv (default threading) | DummyVecEnv of single "
+              "envs | ratio |", "|---|---|---|---|"]
+        L += [f"| {names.get(r['condition'], r['condition'])} | {r['sb3_batched']:,.0f} | "
+              f"{r['sb3_dummy']:,.0f} | {r['sb3_batched'] / r['sb3_dummy']:.2f}x |"
+              for r in sb]
+    if host:
+        gains = ", ".join(f"{r['threaded'] / r['serial']:.2f}x at {r['num_envs']} envs"
+                          for r in b["sweep"] if r["num_envs"] in (256, 1024))
+        L += ["", f"The host's own parallelism: two processes stepping the serial kernel "
+              f"({host['num_envs']} envs each) side by side reach {host['ratio']:.2f}x the "
+              f"env-steps/s of one alone ({host['pair']:,.0f} vs {host['alone']:,.0f}); on "
+              f"the same host, idle, {k} threads give "
+              + (gains or "(no sweep at 256 or 1024 envs)") + " over the serial kernel "
+              "(batch-size table above)."]
+    return L
 
 
 def _parallel_min():

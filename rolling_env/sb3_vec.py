@@ -28,12 +28,14 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
     Infos carry the reward terms of every env; the terminal keys only for those that ended."""
 
     def __init__(self, num_envs: int = 1, scene="default", max_episode_steps=None,
-                 render_mode=None, **overrides):
+                 render_mode=None, num_threads=None, **overrides):
         if render_mode is not None:
             raise ValueError("render_mode must be None: the batched env does not render; use "
                              "a single env (rolling_env.make(..., render_mode='rgb_array'))")
+        # num_threads: None picks serial or threaded steps from measured step times, 1 the
+        # serial kernel, k the threaded kernel on k threads (see rolling_env.vector)
         self.core = BatchCore(num_envs, scene=scene, max_episode_steps=max_episode_steps,
-                              **overrides)
+                              num_threads=num_threads, **overrides)
         self.render_mode = None  # set before the base class reads it
         super().__init__(self.core.num_envs, self.core.observation_space(),
                          spaces.Box(-1.0, 1.0, (3,), np.float32))

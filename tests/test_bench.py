@@ -50,3 +50,42 @@ def test_memory_probe_ignores_the_parents_peak():
     kib = int(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                              check=True).stdout)
     assert big[-1] == 1.0 and kib < 200 * 1024, f"child reported a peak of {kib / 1024:.0f} MiB"
+
+
+def test_competitor_runs_only_inside_its_block():
+    """The busy process of the load conditions runs while the block does and is gone after,
+    also when the block raises."""
+    with pytest.raises(RuntimeError):
+        with bench._Competitor(True) as c:
+            assert c.proc.poll() is None, "the competing process is not running"
+            raise RuntimeError
+    assert c.proc.poll() is not None, "the competing process outlived its block"
+    with bench._Competitor(False) as c:
+        assert c.proc is None
+
+
+def test_load_section_reports_ratios_of_the_same_run():
+    """The report's load table divides each condition's rates by that condition's serial
+    rate, names the path the default ended on, and sets the threads' idle gains beside the
+    host's own parallelism."""
+    rows = [dict(condition="idle", serial=100.0, threads=180.0, default=175.0,
+                 default_threads=2, sb3_batched=90.0, sb3_dummy=30.0, load_average=1.23),
+            dict(condition="busy", serial=80.0, threads=20.0, default=78.0, default_threads=1,
+                 sb3_batched=60.0, sb3_dummy=20.0),
+            dict(condition="work", serial=50.0, threads=55.0, default=54.0, default_threads=2)]
+    load = dict(num_envs=256, threads=2, sb3_envs=8, work_seconds=1e-3,
+                serial_step_seconds=1.1e-3, rows=rows)
+    host = dict(num_envs=256, alone=100.0, pair=190.0, ratio=1.9)
+    sweep = {"sweep": [dict(num_envs=256, serial=100.0, threaded=170.0, default=168.0),
+                       dict(num_envs=1024, serial=100.0, threaded=185.0, default=180.0)]}
+    text = "\n".join(bench._load_section(load, host, sweep))
+    assert "| 100 | 180 | 175 | 1.75 | 1.80 | 2 threads | 1.2 |" in text, text
+    assert "| 80 | 20 | 78 | 0.97 | 0.25 | the serial kernel | nan |" in text, text
+    assert "| 90 | 30 | 3.00x |" in text and "| 60 | 20 | 3.00x |" in text, text
+    assert "reach 1.90x" in text and "1.70x at 256 envs, 1.85x at 1024 envs" in text, text
+
+
+def test_policy_work_runs_on_a_step_result():
+    work, seconds = bench._policy_work(16, 1e-4)
+    work((np.zeros((16, 13), dtype=np.float32), np.zeros(16)))
+    assert seconds > 0

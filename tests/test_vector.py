@@ -11,16 +11,25 @@ import pytest
 
 import rolling_env
 import rolling_env._envkernel as EK
-from rolling_env.vector import PARALLEL_MIN_ENVS, BatchCore, RollingDriveVecEnv
+from rolling_env.vector import (PARALLEL_MIN_ENVS, BatchCore, RollingDriveVecEnv, ThreadPolicy,
+                                max_threads)
 
 STEPS = 40  # with max_episode_steps = 15: crosses two episode boundaries
-# batch sizes that take the serial and the threaded kernel (``PARALLEL_MIN_ENVS``)
-KERNELS = pytest.mark.parametrize("n", [3, PARALLEL_MIN_ENVS], ids=["serial", "threaded"])
+THREADS = min(2, max_threads())  # the threaded kernel's thread count in these tests
+# batch sizes and num_threads that take the serial kernel (the default below
+# ``PARALLEL_MIN_ENVS`` envs), the threaded kernel, and the default's run-time choice
+KERNELS = pytest.mark.parametrize("n,num_threads", [(3, None), (PARALLEL_MIN_ENVS, THREADS),
+                                                    (PARALLEL_MIN_ENVS, None)],
+                                  ids=["serial", "threaded", "default"])
 
 
-def _kernel_of(core, n):
-    want = EK.env_step_parallel if n >= PARALLEL_MIN_ENVS else EK.env_step_serial
-    assert core._step_fn is want, f"{n} envs step with {core._step_fn.__name__}"
+def _kernel_of(core, n, num_threads):
+    if num_threads is None and n < PARALLEL_MIN_ENVS:
+        assert core._step_fn is EK.env_step_serial, f"{n} envs step with {core._step_fn}"
+    elif num_threads is None:
+        assert isinstance(core.thread_policy, ThreadPolicy) or max_threads() == 1
+    else:
+        assert core.threads == num_threads and core.thread_policy is None
 
 
 def _actions(seed, n, steps=STEPS):
@@ -29,10 +38,10 @@ def _actions(seed, n, steps=STEPS):
 
 @KERNELS
 @pytest.mark.parametrize("scene", ["default", "resonant", "heavy_inf_friction", "loaded"])
-def test_gymnasium_vector_env_matches_single_envs(scene, n):
+def test_gymnasium_vector_env_matches_single_envs(scene, n, num_threads):
     venv = gym.make_vec("RollingDrive-v0", num_envs=n, vectorization_mode="vector_entry_point",
-                        scene=scene, max_episode_steps=15)
-    _kernel_of(venv.unwrapped.core, n)
+                        scene=scene, max_episode_steps=15, num_threads=num_threads)
+    _kernel_of(venv.unwrapped.core, n, num_threads)
     singles = [gym.make("RollingDrive-v0", scene=scene, max_episode_steps=15) for _ in range(n)]
     vobs, _ = venv.reset(seed=7)
     sobs = np.stack([e.reset(seed=7 + i)[0] for i, e in enumerate(singles)])
@@ -54,9 +63,9 @@ def test_gymnasium_vector_env_matches_single_envs(scene, n):
 
 @KERNELS
 @pytest.mark.parametrize("scene", ["default", "light_stiff"])
-def test_sb3_vecenv_matches_single_envs(scene, n):
-    venv = RollingDriveVecEnv(n, scene=scene, max_episode_steps=15)
-    _kernel_of(venv.core, n)
+def test_sb3_vecenv_matches_single_envs(scene, n, num_threads):
+    venv = RollingDriveVecEnv(n, scene=scene, max_episode_steps=15, num_threads=num_threads)
+    _kernel_of(venv.core, n, num_threads)
     venv.seed(3)
     vobs = venv.reset()
     singles = [gym.make("RollingDrive-v0", scene=scene, max_episode_steps=15) for _ in range(n)]
@@ -120,9 +129,8 @@ def test_reset_mask_must_be_one_bool_per_env(mask):
 
 
 def test_parallel_kernel_equals_serial():
-    a, b = BatchCore(70), BatchCore(70)  # >= PARALLEL_MIN_ENVS: threaded kernel
-    assert a._step_fn is EK.env_step_parallel
-    b._step_fn = EK.env_step_serial
+    a, b = BatchCore(70, num_threads=THREADS), BatchCore(70, num_threads=1)
+    assert b._step_fn is EK.env_step_serial and a._step_fn is not EK.env_step_serial
     a.seed(1), b.seed(1)
     a.reset(), b.reset()
     for acts in _actions(4, n=70, steps=10):
@@ -132,15 +140,14 @@ def test_parallel_kernel_equals_serial():
 
 
 
-@pytest.mark.parametrize("num_envs", [3, 70])  # serial and threaded kernel
-def test_step_returns_the_kernels_reward_and_truncation_as_copies(num_envs):
+@pytest.mark.parametrize("num_envs,num_threads", [(3, 1), (70, THREADS), (70, None)],
+                         ids=["serial", "threaded", "default"])
+def test_step_returns_the_kernels_reward_and_truncation_as_copies(num_envs, num_threads):
     """``BatchCore.step`` returns the reward and ``steps >= max_episode_steps`` that the kernel
     writes per env: equal to the extras' reward column and to the step counts compared in
     numpy, also after the limit changes mid-episode (SB3's set_attr does that) and for envs
     reset at different times; and as copies that the next step does not overwrite."""
-    core = BatchCore(num_envs, max_episode_steps=12)
-    assert core._step_fn is (EK.env_step_parallel if num_envs >= PARALLEL_MIN_ENVS
-                             else EK.env_step_serial)
+    core = BatchCore(num_envs, max_episode_steps=12, num_threads=num_threads)
     core.seed(3)
     core.reset()
     kept = []

@@ -1,0 +1,381 @@
+"""Threads of the batched env: the run-time choice between the serial and the threaded
+kernel (``ThreadPolicy``, driven here by a fake clock: no timed asserts), bit-identical
+transitions whichever kernel runs, the ``num_threads`` argument, and the training script's
+choice of vector env."""
+from __future__ import annotations
+
+import json
+import os
+
+import gymnasium as gym
+import numba
+import numpy as np
+import pytest
+
+import rolling_env  # noqa: F401  (registers RollingDrive-v0)
+import rolling_env._envkernel as EK
+from rolling_env.vector import (PARALLEL_MIN_ENVS, BatchCore, RollingDriveVecEnv, ThreadPolicy,
+                                max_threads, thread_choices)
+
+THREADS = min(2, max_threads())
+two_threads = pytest.mark.skipif(max_threads() < 2, reason="numba runs one thread here")
+
+
+class FakeClock:
+    """A clock that only moves when told to."""
+
+    def __init__(self):
+        self.t = 0.0
+
+    def __call__(self):
+        return self.t
+
+
+def _drive(policy, clock, steps, kernel_s, gap_s=1e-4):
+    """Run ``steps`` steps through ``policy.next``/``done`` on ``clock``: the kernel of choice
+    i takes ``kernel_s(i, step)`` seconds, the caller ``gap_s`` between steps.  Returns the
+    choice of each step and the clock time spent over always running the fastest choice."""
+    picks, extra = [], 0.0
+    for k in range(steps):
+        i = policy.next()
+        picks.append(i)
+        t = kernel_s(i, k)
+        extra += t - min(kernel_s(j, k) for j in range(len(policy.choices)))
+        clock.t += t
+        policy.done()
+        clock.t += gap_s
+    return picks, extra
+
+
+@pytest.mark.parametrize("slow", [1.5, 3.0, 20.0])
+def test_policy_settles_on_the_serial_kernel_when_threads_lose(slow):
+    """Threaded steps ``slow`` times as long as serial ones: after the first probe the serial
+    kernel runs, and the later probes of the threads cost about ``BUDGET`` of the time."""
+    clock = FakeClock()
+    p = ThreadPolicy((1, 2), clock=clock)
+    cost = (1e-3, slow * 1e-3)
+    picks, extra = _drive(p, clock, 5000, lambda i, k: cost[i])
+    assert p.threads == 1 and p.current == 0, p.estimate
+    assert p.estimate[1] > p.estimate[0]
+    assert picks[-50:].count(1) <= ThreadPolicy.PROBE + 1
+    total = 5000 * (1e-3 + 1e-4)
+    first_probe = (ThreadPolicy.PROBE + 1) * (cost[1] - cost[0])
+    assert extra <= 1.5 * ThreadPolicy.BUDGET * total + first_probe, (extra, total, p.probes)
+    assert p.probes >= 2, "the threads must be re-measured now and then"
+
+
+def test_policy_drops_a_far_slower_choice_after_one_timed_step():
+    """A probe stops once its timed steps cost more over the current choice than the
+    budget has bought since that choice last ran: threads 100x slower than serial run two
+    steps (the switch and one timed step) in the first probe, not the full probe, and are
+    probed again only after thousands of steps, within the budget."""
+    clock = FakeClock()
+    p = ThreadPolicy((1, 2), clock=clock)
+    picks, extra = _drive(p, clock, 30_000, lambda i, k: (1e-4, 1e-2)[i], gap_s=0.0)
+    runs = [k for k in range(1, len(picks)) if picks[k] == 1 and picks[k - 1] == 0]
+    assert picks[runs[0]:runs[0] + 3] == [1, 1, 0], picks[runs[0]:runs[0] + 6]
+    assert 2 <= len(runs) <= 4 and np.all(np.diff(runs) > 5000), runs
+    assert extra <= 1.5 * ThreadPolicy.BUDGET * 30_000 * 1e-4 + 2e-2, extra
+    assert p.threads == 1
+
+
+def test_policy_undoes_a_lucky_probe_within_a_few_steps():
+    """Threads whose probe happened to be fast (they had the core to themselves for a
+    while) but whose steps then run 20x slower: the policy takes them, notices within a few
+    steps (at the next renewal of its estimate) and goes back to the serial kernel."""
+    clock = FakeClock()
+    p = ThreadPolicy((1, 2), clock=clock)
+    lucky = 200  # threaded steps at 0.5 ms: the first probe sees only these
+    picks = []
+    for _ in range(600):
+        i = p.next()
+        picks.append(i)
+        clock.t += 1e-3 if i == 0 else (0.5e-3 if picks.count(1) <= lucky else 20e-3)
+        p.done()
+        clock.t += 1e-4
+    assert p.switches >= 2 and p.threads == 1, (p.switches, p.estimate)
+    # slow threaded steps run: at most until the estimate is next renewed
+    assert 0 < picks.count(1) - lucky <= ThreadPolicy.RENEW, picks.count(1) - lucky
+
+
+def test_policy_takes_the_threads_when_they_win():
+    clock = FakeClock()
+    p = ThreadPolicy((1, 2), clock=clock)
+    picks, extra = _drive(p, clock, 3000, lambda i, k: (2e-3, 1e-3)[i])
+    assert p.threads == 2 and p.switches >= 1
+    assert picks[-1000:].count(0) < 50, picks[-1000:].count(0)
+    assert extra <= 1.5 * ThreadPolicy.BUDGET * 3000 * 1.1e-3 + 2e-2, extra
+
+
+def test_policy_follows_a_change_of_load():
+    """Threads win for 1000 steps, then a busy host makes them 4x slower than serial: the
+    policy goes back to the serial kernel within a few dozen steps (the guard), and back to
+    the threads when the host is idle again."""
+    clock = FakeClock()
+    p = ThreadPolicy((1, 2), clock=clock)
+
+    def cost(i, k):
+        busy = 1000 <= k < 3000
+        return (1e-3, 4e-3 if busy else 0.5e-3)[i]
+    picks, _ = _drive(p, clock, 7000, cost)
+    assert picks[900:1000].count(1) > 90, "threads win on the idle host"
+    assert picks[1100:3000].count(0) > 1800, "serial on the busy host"
+    back = next(k for k in range(1000, 3000) if picks[k:k + 20].count(0) == 20)
+    assert back < 1050, f"took {back - 1000} steps to leave the slowed threads"
+    # found again at the next probe, which the budget spaces by what the last one cost
+    again = next(k for k in range(3000, 7000) if picks[k:k + 100].count(1) > 95)
+    assert again < 3000 + 3000, again
+    assert picks[-1000:].count(1) > 950, "threads again once the load is gone"
+
+
+def test_policy_ignores_a_long_pause_between_steps():
+    """A caller's pause (a learner's update, seconds long) between two steps is not taken
+    for the kernel's cost: the times between steps count by their median."""
+    clock = FakeClock()
+    p = ThreadPolicy((1, 2), clock=clock)
+    picks = []
+    for k in range(3000):
+        i = p.next()
+        picks.append(i)
+        clock.t += (1e-3, 0.5e-3)[i]
+        p.done()
+        clock.t += 5.0 if k % 256 == 255 else 1e-4
+    assert p.threads == 2 and picks[-1000:].count(1) > 950, picks[-1000:].count(1)
+
+
+def test_policy_counts_stalls_of_a_waiting_thread():
+    """Threaded steps that are fast most of the time but now and then stall for a time slice
+    (a worker thread waiting for a core) cost more on average than serial steps: the mean
+    kernel time counts, so the serial kernel runs."""
+    clock = FakeClock()
+    p = ThreadPolicy((1, 2), clock=clock)
+    rng = np.random.default_rng(0)
+    stall = rng.random(4000) < 0.3
+
+    def cost(i, k):
+        return 1e-3 if i == 0 else (12e-3 if stall[k] else 0.6e-3)
+    picks, _ = _drive(p, clock, 4000, cost)
+    assert p.threads == 1
+    assert picks[1000:].count(1) < 0.03 * 3000, picks[1000:].count(1)
+
+
+def test_thread_choices():
+    assert thread_choices(PARALLEL_MIN_ENVS - 1, 16) == (1,)  # too few envs: serial only
+    assert thread_choices(256, 1) == (1,)
+    assert thread_choices(256, 2) == (1, 2)
+    assert thread_choices(64, 16) == (1, 2, 4, 8, 16)
+    assert thread_choices(6, 16) == (1, 2, 4, 6)  # never more threads than envs
+    assert thread_choices(256, 12) == (1, 2, 4, 8, 12)
+
+
+def _counted(fn, counter, key, clock=None, cost=0.0):
+    def run(*args):
+        counter[key] = counter.get(key, 0) + 1
+        if clock is not None:
+            clock.t += cost
+        return fn(*args)
+    return run
+
+
+@two_threads
+def test_batch_runs_the_serial_kernel_when_a_forced_calibration_says_threads_lose():
+    """A real batch whose clock makes each threaded step take 5x a serial one: it ends on the
+    serial kernel, and its transitions are those of the serial kernel alone."""
+    core = BatchCore(8, max_episode_steps=30)
+    ref = BatchCore(8, max_episode_steps=30, num_threads=1)
+    p = core.thread_policy
+    assert p.choices == (1, 2)
+    clock = FakeClock()
+    p.clock = clock
+    ran = {}
+    p._kernels = [_counted(p._kernels[0], ran, 1, clock, 1e-3),
+                  _counted(p._kernels[1], ran, 2, clock, 5e-3)]
+    for c in (core, ref):
+        c.seed(4)
+        c.reset()
+    for acts in np.random.default_rng(5).uniform(-1, 1, (300, 8, 3)):
+        o, r, t = core.step(acts)
+        o2, r2, t2 = ref.step(acts)
+        assert np.array_equal(o, o2) and np.array_equal(r, r2) and np.array_equal(t, t2)
+        for c in (core, ref):
+            if t.any():
+                c.reset(t)
+    # the probe of the threads stops after its switch step and one timed step: they
+    # already cost more than a probe may
+    assert core.threads == 1 and ran[2] >= 2 and ran[1] > 250, ran
+
+
+@two_threads
+@pytest.mark.parametrize("scene", ["default", "light_stiff", "heavy_inf_friction"])
+def test_transitions_are_bit_identical_whichever_kernel_runs(scene):
+    """Each step of the default batch on a randomly drawn kernel (serial, threaded): every
+    observation, reward and truncation equals those of the batch always on the serial kernel
+    and of the batch always on the threads, through episode ends and resets."""
+    n = 9
+    mixed = BatchCore(n, scene=scene, max_episode_steps=13)
+    serial = BatchCore(n, scene=scene, max_episode_steps=13, num_threads=1)
+    threaded = BatchCore(n, scene=scene, max_episode_steps=13, num_threads=THREADS)
+    p = mixed.thread_policy
+    draw = np.random.default_rng(2).integers(0, len(p.choices), 200)
+    it = iter(draw)
+    p.next = lambda: int(next(it))
+    ran = {}
+    p._kernels = [_counted(k, ran, i) for i, k in enumerate(p._kernels)]
+    cores = (mixed, serial, threaded)
+    for c in cores:
+        c.seed(11)
+        c.reset()
+    for acts in np.random.default_rng(3).uniform(-1, 1, (200, n, 3)):
+        out = [c.step(acts) for c in cores]
+        for o, r, t in out[1:]:
+            assert np.array_equal(out[0][0], o) and np.array_equal(out[0][1], r)
+            assert np.array_equal(out[0][2], t)
+        for c in cores:
+            assert np.array_equal(c.st, mixed.st) and np.array_equal(c.cells, mixed.cells)
+        if out[0][2].any():
+            for c in cores:
+                c.reset(out[0][2])
+    assert ran.get(0, 0) > 50 and ran.get(1, 0) > 50, ran
+
+
+@two_threads
+def test_threads_leave_the_callers_numba_setting_as_it_was():
+    """numba keeps its thread count per calling thread: a step on 2 threads sets it for the
+    kernel only, and the default caps its choices at the caller's count when built; no
+    environment variable (OMP_WAIT_POLICY, NUMBA_*) is set."""
+    env_before = dict(os.environ)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        core = BatchCore(8, num_threads=2)
+        core.reset()
+        core.step(np.zeros((8, 3)))
+        assert numba.get_num_threads() == 1, "the step changed the caller's thread count"
+        assert BatchCore(8).thread_policy is None, "built with 1 thread: serial only"
+        numba.set_num_threads(2)
+        core = BatchCore(8)
+        core.reset()
+        for _ in range(40):
+            core.step(np.zeros((8, 3)))
+        assert numba.get_num_threads() == 2
+        assert core.thread_policy.probes >= 1, "the threads were tried"
+    finally:
+        numba.set_num_threads(before)
+    assert dict(os.environ) == env_before
+
+
+BAD = [0, -1, 10**6, 1.5, 2.0, "2", True, np.float64(2.0), [2]]
+
+
+@pytest.mark.parametrize("bad", BAD)
+@pytest.mark.parametrize("make", ["core", "make_vec", "sb3"])
+def test_num_threads_is_checked(make, bad):
+    """A bad num_threads is one ValueError line naming the parameter and the range."""
+    build = {"core": lambda: BatchCore(8, num_threads=bad),
+             "make_vec": lambda: gym.make_vec("RollingDrive-v0", num_envs=8, num_threads=bad),
+             "sb3": lambda: RollingDriveVecEnv(8, num_threads=bad)}[make]
+    with pytest.raises(ValueError) as e:
+        build()
+    msg = str(e.value)
+    assert "\n" not in msg
+    assert msg.startswith(f"num_threads must be None (chosen at run time) or an integer in "
+                          f"[1, {max_threads()}]"), msg
+    assert msg.endswith(f"got {bad!r}"), msg
+
+
+@pytest.mark.parametrize("k", [1, np.int64(1), THREADS, None])
+def test_num_threads_accepts_none_and_counts(k):
+    v = gym.make_vec("RollingDrive-v0", num_envs=8, num_threads=k)
+    core = v.unwrapped.core
+    assert core.num_threads == (None if k is None else int(k))
+    if k is not None:
+        assert core.threads == k and core.thread_policy is None
+        assert (core._step_fn is EK.env_step_serial) == (k == 1)
+    v.reset(seed=0)
+    v.step(np.zeros((8, 3), dtype=np.float32))
+    assert RollingDriveVecEnv(8, num_threads=k).core.num_threads == core.num_threads
+
+
+# ----------------------------------------------------------------- agents.train
+def test_make_vec_env_kinds_give_the_same_transitions():
+    """The batched env and the DummyVecEnv of single envs that agents.train chooses between
+    step identically (same seeds, rewards, episode ends and terminal observations)."""
+    from agents.common import make_vec_env
+    kw = {"max_episode_steps": 20}
+    a = make_vec_env("default", 3, 5, kw, kind="batched")
+    b = make_vec_env("default", 3, 5, kw, kind="dummy")
+    assert np.array_equal(a.reset(), b.reset())
+    for acts in np.random.default_rng(0).uniform(-1, 1, (45, 3, 3)).astype(np.float32):
+        oa, ra, da, ia = a.step(acts)
+        ob, rb, db, ib = b.step(acts)
+        assert np.array_equal(oa, ob) and np.array_equal(ra, rb) and np.array_equal(da, db)
+        for x, y in zip(ia, ib):
+            assert ("terminal_observation" in x) == ("terminal_observation" in y)
+            if "terminal_observation" in x:
+                assert np.array_equal(x["terminal_observation"], y["terminal_observation"])
+    with pytest.raises(ValueError, match="^kind must be 'batched' or 'dummy'"):
+        make_vec_env("default", 1, 0, kind="subproc")
+
+
+@pytest.mark.parametrize("rates,want", [({"batched": 5e4, "dummy": 2e4}, "batched"),
+                                        ({"batched": 1e4, "dummy": 2e4}, "dummy")])
+def test_train_takes_the_faster_vector_env(rates, want):
+    from agents.train import choose_vec_env
+    seen = []
+
+    def measure(scene, n_envs, env_kwargs, num_threads):
+        seen.append((scene, n_envs, num_threads))
+        return rates
+    kind, record = choose_vec_env("auto", "default", 8, {}, None, measure=measure)
+    assert kind == want and seen == [("default", 8, None)]
+    assert record == {"kind": want, "chosen_by": "measured at start",
+                      "env_steps_per_s": {k: round(v) for k, v in rates.items()}}
+
+
+@pytest.mark.parametrize("flag", ["batched", "dummy"])
+def test_train_vec_env_flag_overrides_the_measurement(flag):
+    from agents.train import choose_vec_env
+
+    def measure(*a):
+        raise AssertionError("measured despite --vec-env")
+    assert choose_vec_env(flag, "default", 8, {}, None, measure=measure) == (
+        flag, {"kind": flag, "chosen_by": "--vec-env"})
+
+
+def test_train_measurement_rates_both_kinds():
+    from agents.train import measure_vec_envs
+    rates = measure_vec_envs("default", 2, {}, None, seconds=0.1, rounds=1)
+    assert set(rates) == {"batched", "dummy"} and all(v > 0 for v in rates.values()), rates
+
+
+@pytest.mark.parametrize("text,want", [("auto", None), ("1", 1), (str(max_threads()),
+                                                                max_threads())])
+def test_train_num_threads_flag(text, want):
+    from agents.train import build_parser
+    args = build_parser().parse_args(["--algo", "ppo", "--num-threads", text])
+    assert args.num_threads == want and args.vec_env == "auto"
+
+
+@pytest.mark.parametrize("text", ["0", str(max_threads() + 1), "two", "1.5", ""])
+def test_train_refuses_a_bad_num_threads(text, capsys):
+    from agents.train import build_parser
+    with pytest.raises(SystemExit) as e:
+        build_parser().parse_args(["--algo", "ppo", "--num-threads", text])
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.endswith(f"argument --num-threads: num-threads must be 'auto' or an integer in "
+                        f"[1, {max_threads()}], got {text!r}"), err
+
+
+def test_train_records_the_vector_env_in_meta(tmp_path):
+    """--vec-env dummy trains on SB3's DummyVecEnv (no measurement) and meta.json says so,
+    with the --num-threads setting."""
+    from agents.train import main as train_main
+    run = tmp_path / "run"
+    argv = ["--algo", "ppo", "--n-timesteps", "64", "--n-envs", "2", "--eval-freq", "64",
+            "--eval-episodes", "1", "--no-progress", "--run-dir", str(run),
+            "--vec-env", "dummy", "--num-threads", "1"]
+    assert train_main(argv) == 0
+    meta = json.loads((run / "meta.json").read_text())
+    assert meta["vec_env"] == {"kind": "dummy", "chosen_by": "--vec-env", "num_threads": 1}
+    assert meta["env_steps"] >= 64
