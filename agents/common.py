@@ -539,7 +539,11 @@ def save_model(model, vecnorm, folder: str | os.PathLike, name: str = "model") -
 #: the task (``n_sub``: the sub-steps per tick they resolve to, ``Scene.n_sub``).  A run whose
 #: recorded scene differs from the evaluated one only in these is evaluated and marked
 #: (``numerics_note``); a difference in any other key refuses it.
-NUMERICS_KEYS = ("sub_steps", "resolution", "accuracy", "n_sub")
+NUMERICS_KEYS = ("sub_steps", "resolution", "accuracy", "grid_levels", "n_sub")
+
+#: numerics keys added after runs were recorded, with the value in effect before each existed
+#: (where that differs from the key's default): one fixed grid before the level grid
+BEFORE_KEY = {"grid_levels": 0}
 
 
 def scene_fields(scene) -> dict:
@@ -572,7 +576,8 @@ def scene_digest(scene) -> str:
 def completed_fields(fields: dict) -> dict:
     """A run's recorded ``scene_fields`` with what a run recorded before a key existed filled
     in: a Scene field with a default (``accuracy``) takes its default, as a scene file that
-    leaves it out does, and ``n_sub`` the recorded ``sub_steps`` where that is a number."""
+    leaves it out does, or the value in effect before it existed (``BEFORE_KEY``:
+    ``grid_levels`` 0), and ``n_sub`` the recorded ``sub_steps`` where that is a number."""
     import dataclasses
 
     from rolling_env.scenes import Scene
@@ -580,7 +585,7 @@ def completed_fields(fields: dict) -> dict:
     for f in dataclasses.fields(Scene):
         if f.name not in out and f.name not in ("name", "description") \
                 and f.default is not dataclasses.MISSING:
-            out[f.name] = f.default
+            out[f.name] = BEFORE_KEY.get(f.name, f.default)
     sub = out.get("sub_steps")
     if "n_sub" not in out and isinstance(sub, int) and not isinstance(sub, bool):
         out["n_sub"] = sub
@@ -598,7 +603,7 @@ def numerics_note(trained: dict, now: dict) -> str:
     parts = []
     if any(trained.get(k) != now.get(k) for k in ("sub_steps", "n_sub")):
         parts.append(f"sub_steps {_sub_steps_text(trained)} (now {_sub_steps_text(now)})")
-    for k in ("resolution", "accuracy"):
+    for k in ("resolution", "accuracy", "grid_levels"):
         if trained.get(k) != now.get(k):
             parts.append(f"{k} {trained.get(k, '-'):g} (now {now.get(k, '-'):g})"
                          if isinstance(trained.get(k), (int, float))

@@ -547,7 +547,7 @@ def write_tables(rows: list[dict], out: Path, episodes: int | None = None,
                 "else its final model or checkpoint (`--model best`)")
              + "; *model* names the file evaluated."
              + ("  Agents marked [k] were trained on their scene with other numerics (the "
-                "keys sub_steps, resolution and accuracy, which set how finely the env "
+                "keys sub_steps, resolution, accuracy and grid_levels, which set how finely the env "
                 "integrates the same physics; the notes below the table say what differed) and "
                 "the same physics and task keys: they are evaluated as they are, not retrained, "
                 "on the scene's numerics as they are now, like the baselines."

@@ -101,7 +101,8 @@ ST_SNAP = 16    # cumulative elastic energy lost beyond the Coulomb work when sp
                 # the lower friction limit of an instantaneous normal-load drop
 ST_KIN0 = 17    # runner's kinetic energy at reset: the ledger's starting balance (written by
                 # Drive.reset, read by Drive.energy; the kernel never touches it)
-N_STATE = 18
+ST_LEVEL = 18   # grid level k of a level grid (``P_LEVELS`` > 0): cells of dx / 2^k
+N_STATE = 19
 
 # (omega_n dt)^2 (omega_n on the stuck contact) at which the runner step is half-way from
 # the exact (piecewise) scheme to backward Euler (``_blend``)
@@ -150,8 +151,9 @@ def work_rows(finite_mu: bool, ledger: bool = True) -> int:
 P_R = 0
 P_E_OVER_G = 1
 P_X_LO = 2
-P_DX = 3
-N_PARAM = 4
+P_DX = 3         # cell size at level 0
+P_LEVELS = 4     # finest level of the level grid (0: a fixed grid, ``_regrid``)
+N_PARAM = 5
 
 
 @njit(inline="always", **JIT)
@@ -410,17 +412,140 @@ def _inv_speed(u):
 
 
 @njit(inline="always", **JIT)
-def _shrink_cell(U, i, xL, dx, c, a_old, a_new):
-    """Release the part of cell i cut off when the contact shrinks from a_old to a_new (uniform
-    content).  Returns (released elastic energy, change of content, new overlap)."""
+def _slope(U, i, xL, dx, c, a, n):
+    """Slope of the deflection across cell i (inside the contact c +- a) from its neighbours'
+    mean deflections at their parts' centroids, minmod-limited (0 at an extremum, or where a
+    neighbour is out of contact or off the row): the linear reconstruction that the remaps
+    (a cut, a finer grid) use to place content within a cell."""
+    if i < 1 or i + 1 >= n:
+        return 0.0
+    return _slope3(U[i - 1], U[i], U[i + 1], xL, dx, c, a)
+
+
+@njit(inline="always", **JIT)
+def _slope3(Ul, U0, Ur, xL, dx, c, a):
+    """``_slope`` of a cell [xL, xL + dx] wholly in contact with contents Ul, U0, Ur (left,
+    own, right)."""
+    lo_l = max(xL - dx, c - a)
+    l_l = xL - lo_l
+    hi_r = min(xL + 2.0 * dx, c + a)
+    l_r = hi_r - (xL + dx)
+    if l_l <= 0.0 or l_r <= 0.0:
+        return 0.0
+    u0 = U0 / dx
+    gl = (u0 - Ul / l_l) / (xL + 0.5 * dx - 0.5 * (lo_l + xL))
+    gr = (Ur / l_r - u0) / (0.5 * (xL + dx + hi_r) - (xL + 0.5 * dx))
+    if gl * gr <= 0.0:
+        return 0.0
+    return gl if abs(gl) < abs(gr) else gr
+
+
+@njit(inline="always", **JIT)
+def _shrink_cell(U, i, xL, dx, c, a_old, a_new, g):
+    """Release the part of cell i cut off when the contact shrinks from a_old to a_new.  A cell
+    that was wholly in contact keeps the content of its linear reconstruction (slope g,
+    ``_slope``) over the part still in contact; an edge cell keeps its uniform share.  Returns
+    (released elastic energy, change of content, new overlap)."""
     lo = _overlap(xL, xL + dx, c, a_old)
     ln = _overlap(xL, xL + dx, c, a_new)
     if lo > 0.0 and ln < lo:
         Ui = U[i]
         Un = Ui * ln / lo
+        if ln > 0.0 and lo >= dx and g != 0.0:
+            xm = xL + 0.5 * dx
+            zl = max(xL, c - a_new) - xm
+            zh = min(xL + dx, c + a_new) - xm
+            Un += 0.5 * g * (zh * zh - zl * zl)
         U[i] = Un
         return 0.5 * Ui * Ui / lo - (0.5 * Un * Un / ln if ln > 0.0 else 0.0), Un - Ui, ln
     return 0.0, 0.0, ln
+
+
+@njit(inline="always", **JIT)
+def _level_grid(n_all, st, p):
+    """(cell size, cells in use) of the grid level held in ``st``: level k has cells of
+    dx / 2^k over the same row, so n_all / 2^(levels - k) of the array's n_all columns."""
+    lv = int(st[ST_LEVEL])
+    return p[P_DX] / (1 << lv), n_all >> (int(p[P_LEVELS]) - lv)
+
+
+@njit(inline="always", **JIT)
+def _target_level(a, levels, lv):
+    """The level for a contact of half-width a (units of a_ref, where the grid has its
+    resolution): the coarsest whose cells give the contact at least half the cells per radius
+    that a_ref has, floor(log2(1/a)), capped at ``levels``.  The level held (``lv``) is kept
+    while it is that one or the next finer, so that a load dithering about a level boundary
+    does not remap at every tick."""
+    if a <= 0.0:
+        return lv  # no contact: nothing to remap, the next contact decides
+    k = 0
+    r = a
+    while r < 0.5 - 1e-9 and k < levels:
+        r *= 2.0
+        k += 1
+    if lv == k or lv == k + 1:
+        return lv
+    return k
+
+
+@njit(**JIT)
+def _regrid(W, st, p, lv_new, ledger):
+    """Move the contents to grid level ``lv_new``, conservatively: a merge (a larger contact)
+    sums the children's contents; a split (a smaller contact) gives the children of a cell
+    wholly in contact the content of its linear reconstruction (``_slope3``) over them, and
+    those of an edge cell shares in proportion to their overlaps.  Merging loses the spread of
+    the children's deflections, elastic energy that the ledger counts as released."""
+    U = W[W_U]
+    n_all = U.shape[0]
+    dx_o, n_o = _level_grid(n_all, st, p)
+    lv_o = int(st[ST_LEVEL])
+    c = st[ST_C]
+    a = st[ST_A]
+    x_lo = p[P_X_LO]
+    st[ST_LEVEL] = lv_new
+    dx_n, n_n = _level_grid(n_all, st, p)
+    if a <= 0.0:
+        return
+    i0, i1 = _contact_range(c, a, x_lo, dx_o, n_o)
+    if lv_new > lv_o:
+        m = 1 << (lv_new - lv_o)
+        u_r = 0.0  # the content of the cell above, before it was split
+        for i in range(i1, i0 - 1, -1):  # children m i.. lie at or above i: top down
+            val = U[i]
+            U[i] = 0.0
+            xL = x_lo + i * dx_o
+            lp = _overlap(xL, xL + dx_o, c, a)
+            g = 0.0
+            if lp >= dx_o and i > 0:  # wholly in contact: split its linear reconstruction
+                g = _slope3(U[i - 1], val, u_r, xL, dx_o, c, a)
+            u_r = val
+            if lp <= 0.0:
+                continue
+            f = val / lp
+            xm = xL + 0.5 * dx_o
+            for j in range(m * i, m * i + m):
+                xc = x_lo + j * dx_n
+                lc = _overlap(xc, xc + dx_n, c, a)
+                U[j] = f * lc + g * lc * (xc + 0.5 * dx_n - xm) if lc > 0.0 else 0.0
+    else:
+        m = 1 << (lv_o - lv_new)
+        lost = 0.0
+        for q in range(i0 // m, i1 // m + 1):  # parent q at or below its children: bottom up
+            val = 0.0
+            e = 0.0
+            for j in range(m * q, min(m * q + m, n_o)):
+                uj = U[j]
+                val += uj
+                if ledger is not None and uj != 0.0:
+                    xc = x_lo + j * dx_o
+                    e += 0.5 * uj * uj / _overlap(xc, xc + dx_o, c, a)
+                U[j] = 0.0
+            U[q] = val
+            if ledger is not None and val != 0.0:
+                xq = x_lo + q * dx_n
+                lost += e - 0.5 * val * val / _overlap(xq, xq + dx_n, c, a)
+        if ledger is not None:
+            st[ST_REL] += lost
 
 
 @njit(**JIT)
@@ -443,10 +568,13 @@ def _set_radius(W, st, p, a_new, d_new, mu, ledger):
         return 0.0
     c = st[ST_C]
     x_lo = p[P_X_LO]
-    dx = p[P_DX]
+    dx, n = _level_grid(U.shape[0], st, p)
     inv_dx = 1.0 / dx
-    n = U.shape[0]
     i0, i1 = _contact_range(c, a_old, x_lo, dx, n)
+    # the cells holding the new contact's ends, and their slopes before any cell is cut
+    i_lo, i_hi = _contact_range(c, a_new, x_lo, dx, n)
+    g_lo = _slope(U, i_lo, x_lo + i_lo * dx, dx, c, a_old, n) if a_new > 0.0 else 0.0
+    g_hi = _slope(U, i_hi, x_lo + i_hi * dx, dx, c, a_old, n) if a_new > 0.0 else 0.0
     rel = 0.0
     slip = 0.0
     snap = 0.0
@@ -462,7 +590,8 @@ def _set_radius(W, st, p, a_new, d_new, mu, ledger):
         T = st[ST_T]
         for k in _edges(i0, i1, j0, j1):
             i = _edge(k, j0, j1)
-            e_rel, dU, _ = _shrink_cell(U, i, x_lo + i * dx, dx, c, a_old, a_new)
+            e_rel, dU, _ = _shrink_cell(U, i, x_lo + i * dx, dx, c, a_old, a_new,
+                                         g_lo if i == i_lo else (g_hi if i == i_hi else 0.0))
             rel += e_rel
             T += dU
         if a_new <= 0.0:
@@ -475,7 +604,8 @@ def _set_radius(W, st, p, a_new, d_new, mu, ledger):
             i = _edge(k, j0, j1)
             xL = x_lo + i * dx
             xR = xL + dx
-            e_rel, _, ln = _shrink_cell(U, i, xL, dx, c, a_old, a_new)
+            e_rel, _, ln = _shrink_cell(U, i, xL, dx, c, a_old, a_new,
+                                         g_lo if i == i_lo else (g_hi if i == i_hi else 0.0))
             rel += e_rel
             # the clip-and-slip of the tick's commit (a cell cut off entirely has Ui = Li = 0)
             Li, q = _edge_limit(xL, xR, c, a_new, d_new, inv3R, muEG)
@@ -1115,19 +1245,10 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
     by the build pass (the commit uses dx dt for them): it holds stale values except just
     before a call of ``_solve_bracketed`` (finite friction), which reads it.
     """
-    U = W[W_U]
-    A = W[W_A]
-    B = W[W_B]
-    L = W[W_L:]
     R = p[P_R]
     EG = p[P_E_OVER_G]
     x_lo = p[P_X_LO]
-    dx = p[P_DX]
-    n = U.shape[0]
     inv3R = 1.0 / (3.0 * R)
-    inv_dx = 1.0 / dx
-    dxdt = dx * dt
-    tol = _inner_tol(x_lo, inv_dx, n)
     muEG = 0.0
     if mu is not None:
         muEG = mu * EG
@@ -1135,7 +1256,20 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
     inv_au = _inv_speed(u)
     # (patch travel per sub-step / contact radius)^2, for the runner step's blend (``_blend``)
     tr2 = (u * dt / a) * (u * dt / a) if a > 0.0 else 0.0
+    levels = int(p[P_LEVELS])
+    if levels > 0:  # the new contact's level first: a cut and a snap then act on its cells
+        lv = _target_level(a, levels, int(st[ST_LEVEL]))
+        if lv != int(st[ST_LEVEL]):
+            _regrid(W, st, p, lv, ledger)
     slip_tick = _set_radius(W, st, p, a, d, mu, ledger)
+    dx, n = _level_grid(W.shape[1], st, p)
+    U = W[W_U, :n]
+    A = W[W_A, :n]
+    B = W[W_B, :n]
+    L = W[W_L:, :n]
+    inv_dx = 1.0 / dx
+    dxdt = dx * dt
+    tol = _inner_tol(x_lo, inv_dx, n)
     s0 = u - v
     F = 0.0
     if load is not None:
@@ -1501,8 +1635,7 @@ def elastic_energy(U, st, p):
     c = st[ST_C]
     a = st[ST_A]
     x_lo = p[P_X_LO]
-    dx = p[P_DX]
-    n = U.shape[0]
+    dx, n = _level_grid(U.shape[0], st, p)
     if a <= 0.0:
         return 0.0
     i0, i1 = _contact_range(c, a, x_lo, dx, n)
@@ -1523,7 +1656,7 @@ def normal_force_sum(st, p, n):
     a = st[ST_A]
     d = st[ST_D]
     x_lo = p[P_X_LO]
-    dx = p[P_DX]
+    dx, n = _level_grid(n, st, p)
     if a <= 0.0:
         return 0.0
     i0, i1 = _contact_range(c, a, x_lo, dx, n)

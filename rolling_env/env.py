@@ -104,8 +104,8 @@ class RollingDriveEnv(gym.Env):
     ``gym.make("RollingDrive-v0", scene="default", render_mode=None, **overrides)``: ``scene``
     is a shipped scene name (``rolling_env.list_scenes()``), a path to a YAML file, a dict or a
     ``Scene``; ``overrides`` replace scene keys (``mu=0.1``, ``runner_mass=0.01``, ...) with the
-    same validation; ``sub_steps=n`` and ``resolution=r`` override the numerics (``accuracy=``
-    re-chooses "auto" sub-steps).  ``render_mode`` is ``"rgb_array"`` (a uint8 frame of the contact and the
+    same validation; ``sub_steps=n``, ``resolution=r`` and ``grid_levels=L`` override the
+    numerics (``accuracy=`` re-chooses "auto" sub-steps).  ``render_mode`` is ``"rgb_array"`` (a uint8 frame of the contact and the
     runner against its target) or ``"human"`` (the same frame in a matplotlib window).
 
     ## Version History
@@ -119,6 +119,12 @@ class RollingDriveEnv(gym.Env):
       sub-step; the shipped scenes take ``sub_steps: auto`` (from ``accuracy``) and 32 cells
       per contact radius on ``loaded``, ``resonant`` and ``light_stiff``.  Agents trained on
       the earlier transitions are evaluated as they are (results/comparison.md says so).
+    * v0, level grid (same id, action mapping, observations, reward definition and scene
+      physics; different transitions): the cells halve as the contact shrinks, so that every
+      contact keeps more than half the cells per radius that the one at N_max has
+      (``grid_levels``, default 4), with remaps that keep a linear deflection exactly; a
+      load drop cuts the contact at the linear reconstruction of the cell holding its new
+      end; ``light_stiff`` and ``heavy_inf_friction`` take 64 cells per contact radius.
     """
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 30}
@@ -232,7 +238,7 @@ def build_drive(scene: Scene) -> tuple[Drive, float]:
     try:
         drive = Drive(params, a_ref=a_max, resolution=sc.resolution,
                       stroke=(-sc.stroke_roll, sc.stroke_roll), a_max=a_max, t_ref=sc.period,
-                      ledger=False)  # the env kernel leaves the energy ledger out
+                      ledger=False, levels=sc.grid_levels)  # the env kernel keeps no ledger
     except ValueError as e:  # the Drive's message names its own arguments: map them to keys
         raise ValueError(
             f"scene '{sc.name}' cannot be built: {e} (the env builds the drive from the scene "

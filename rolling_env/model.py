@@ -155,7 +155,7 @@ class Drive(CellViews):
 
     def __init__(self, params: DriveParams, *, a_ref: float, resolution: float,
                  stroke: tuple[float, float], a_max: float, t_ref: float,
-                 grid_offset: float = 0.0, ledger: bool = True):
+                 grid_offset: float = 0.0, ledger: bool = True, levels: int = 0):
         check_range("a_ref", a_ref, 0.0, _INF, lo_open=True, hi_open=True)
         check_range("resolution", resolution, 0.5, 1e5)
         check_range("a_max", a_max, 0.0, _INF, lo_open=True, hi_open=True)
@@ -179,8 +179,9 @@ class Drive(CellViews):
             raise ValueError(f"the spring row would need {n} cells (> 2e7) to cover the stroke "
                              f"{stroke[1] - stroke[0]:.3g} m at {resolution:g} cells per a_ref: "
                              "lower the resolution or the stroke (rolling amplitude)")
+        self.levels = check_int("levels", levels, 0, LEVELS_MAX)
         self._p = np.array([params.R / self.L0, params.E_star / params.G_star,
-                            self.grid.x_lo, self.grid.dx])
+                            self.grid.x_lo, self.grid.dx, float(self.levels)])
         finite_mu, free, load = params.features
         self._mu = params.mu if finite_mu else None
         self._mass = params.m / self.M0 if free else None
@@ -195,7 +196,7 @@ class Drive(CellViews):
         # cell work array: contents U, build rows A and B and, with friction only, the friction
         # work rows L (limits, edge release coefficients); U, A, B and L are views of it
         self._ledger = bool(ledger)  # run() keeps the ledger; the env kernel does not
-        self.cells = np.zeros((K.work_rows(finite_mu, self._ledger), n))
+        self.cells = np.zeros((K.work_rows(finite_mu, self._ledger), n << self.levels))
         self.st = np.zeros(K.N_STATE)
 
     def _check_scales(self):
@@ -240,7 +241,13 @@ class Drive(CellViews):
         # the work array of either kernel) load with the rows their setting needs
         if "ledger" in state:
             state["_ledger"] = state.pop("ledger")
+        state.setdefault("levels", 0)
         self.__dict__.update(state)
+        # drives pickled before the level grid: its parameter and state entries are zero
+        if self._p.shape[0] < K.N_PARAM:
+            self._p = np.concatenate([self._p, np.zeros(K.N_PARAM - self._p.shape[0])])
+        if self.st.shape[0] < K.N_STATE:
+            self.st = np.concatenate([self.st, np.zeros(K.N_STATE - self.st.shape[0])])
         rows = K.work_rows(self._mu is not None, self._ledger)
         if rows != self.cells.shape[0]:
             cells = np.zeros((rows, self.cells.shape[1]))
@@ -269,7 +276,7 @@ class Drive(CellViews):
                 raise ValueError(f"vstar0 = {vstar0:g} m/s gives the runner (m = {m:g} kg) a "
                                  "kinetic energy beyond the float range; choose a smaller "
                                  "vstar0")
-        self.U[:] = 0.0
+        self.cells[:] = 0.0  # the scratch and level-grid rows too: a reset drive is a new one
         self.st[:] = 0.0
         self.st[K.ST_C] = c0 / self.L0
         self.st[K.ST_VS] = vstar0 * self.t0 / self.L0
@@ -478,7 +485,7 @@ class Drive(CellViews):
 
     def normal_force(self) -> float:
         """Discrete normal force [N]: sum over cells of E* times the exact integral of uN."""
-        return float(K.normal_force_sum(self.st, self._p, self.grid.n)) * self.F0
+        return float(K.normal_force_sum(self.st, self._p, self.cells.shape[-1])) * self.F0
 
     @property
     def c(self) -> float:
@@ -500,24 +507,31 @@ class Drive(CellViews):
     def T(self) -> float:
         return self.st[K.ST_T] * self.F0
 
+    @property
+    def cell_size(self) -> float:
+        """Cell size of the grid level in use (units of a_ref; ``grid.dx`` at level 0)."""
+        return self.grid.dx / (1 << int(self.st[K.ST_LEVEL]))
+
     def profile(self):
         """Cell centres x [m], uT [m], uN [m] and slip flag along the row (for plots)."""
         g = self.grid
-        x = (g.x_lo + (np.arange(g.n) + 0.5) * g.dx)
+        dx, n = self.cell_size, g.n << int(self.st[K.ST_LEVEL])
+        x = (g.x_lo + (np.arange(n) + 0.5) * dx)
         c, a, d = self.st[K.ST_C], self.st[K.ST_A], self.st[K.ST_D]
-        xl = g.x_lo + np.arange(g.n) * g.dx
-        ell = np.clip(np.minimum(xl + g.dx, c + a) - np.maximum(xl, c - a), 0.0, None)
-        uT = np.where(ell > 0, self.U / np.where(ell > 0, ell, 1.0), 0.0)
+        xl = g.x_lo + np.arange(n) * dx
+        ell = np.clip(np.minimum(xl + dx, c + a) - np.maximum(xl, c - a), 0.0, None)
+        uT = np.where(ell > 0, self.U[:n] / np.where(ell > 0, ell, 1.0), 0.0)
         uN = np.clip(d - (x - c) ** 2 / self._p[K.P_R], 0.0, None)
         if self._mu is not None:
             EG = self._p[K.P_E_OVER_G]
             slip = (ell > 0) & (np.abs(uT) >= self._mu * EG * uN * (1 - 1e-9))
         else:
-            slip = np.zeros(g.n, bool)
+            slip = np.zeros(n, bool)
         return x * self.L0, uT * self.L0, uN * self.L0, slip
 
 
 N_SUB_MAX = 10**9
+LEVELS_MAX = 12  # finest level of a level grid: cells down to dx / 4096
 MU_EG_MAX = 1e300  # largest mu E*/G* the kernel takes (sums of limits over cells stay finite)
 
 

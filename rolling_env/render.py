@@ -32,9 +32,9 @@ def render_frame(env, state: dict) -> np.ndarray:
     um = 1e9
     ax1.plot(x / a, uN * um, color="0.3", lw=1, label="normal deflection uN [nm]")
     ax1b = ax1.twinx()
-    ax1b.bar((x / a)[inc & ~slip], (uT * um)[inc & ~slip], width=drv.grid.dx, color="tab:blue",
+    ax1b.bar((x / a)[inc & ~slip], (uT * um)[inc & ~slip], width=drv.cell_size, color="tab:blue",
              label="uT stick [nm]")
-    ax1b.bar((x / a)[inc & slip], (uT * um)[inc & slip], width=drv.grid.dx, color="tab:red",
+    ax1b.bar((x / a)[inc & slip], (uT * um)[inc & slip], width=drv.cell_size, color="tab:red",
              label="uT slip [nm]")
     ax1.set_zorder(ax1b.get_zorder() + 1)  # the normal profile on top of the bars
     ax1.patch.set_visible(False)

@@ -479,7 +479,7 @@ class BatchCore(CellViews):
         given = self.check_options(options, idx)
         for i, g in zip(idx, given):  # each env draws from its own generator
             self.target[i] = sample_target(self.scene, self.rngs[i], g)
-        self.U[idx] = 0.0
+        self.cells[idx] = 0.0  # the scratch and level-grid rows too
         self.st[idx] = 0.0
         self.steps[idx] = 0
         self.extra[idx] = 0.0

@@ -696,23 +696,29 @@ def _as_if_trained_on(run, **changes):
 
 
 def test_numerics_of_a_recorded_scene_are_completed_and_described():
-    """A run recorded before a scene key existed (``accuracy``, ``n_sub``) is read with the
-    key's default (the recorded sub_steps for n_sub): no difference where nothing else
-    changed; the note names what differs in the numerics, the resolved sub-steps too; the
-    shipped scenes record the sub-steps they resolve to."""
+    """A run recorded before a scene key existed (``accuracy``, ``n_sub``, ``grid_levels``) is
+    read with the value in effect then (the key's default; the recorded sub_steps for n_sub;
+    one fixed grid, 0 levels): no difference where nothing else changed; the note names what
+    differs in the numerics, the resolved sub-steps too; the shipped scenes record the
+    sub-steps they resolve to."""
     from agents.common import completed_fields, numerics_note, scene_fields
     now = scene_fields("heavy_inf_friction")
     n = rolling_env.scenes.load_scene("heavy_inf_friction").n_sub
     assert now["sub_steps"] == "auto" and now["n_sub"] == n and now["accuracy"] == 0.01, now
-    assert now["resolution"] == 16, "the notes below assume 16 cells per radius"
+    assert now["resolution"] == 64, "the notes below assume 64 cells per radius"
+    assert now["grid_levels"] == 4, "the notes below assume 4 grid levels"
     old = {k: v for k, v in now.items() if k not in ("accuracy", "n_sub")}
+    before_levels = {k: v for k, v in old.items() if k != "grid_levels"}
+    assert completed_fields(dict(before_levels, sub_steps="auto"))["grid_levels"] == 0
+    assert numerics_note(completed_fields(dict(before_levels, sub_steps="auto", n_sub=n)),
+                         now) == "grid_levels 0 (now 4)"
     assert completed_fields(dict(old, sub_steps="auto"))["accuracy"] == 0.01
     assert numerics_note(completed_fields(dict(old, sub_steps=8)), now) == (
         f"sub_steps 8 (now auto: {n})")
     assert numerics_note(completed_fields(dict(now)), now) == ""
     assert numerics_note(completed_fields(dict(old, sub_steps=n + 1, resolution=32.0,
                                                accuracy=0.05)), now) == (
-        f"sub_steps {n + 1} (now auto: {n}), resolution 32 (now 16), accuracy 0.05 (now 0.01)")
+        f"sub_steps {n + 1} (now auto: {n}), resolution 32 (now 64), accuracy 0.05 (now 0.01)")
 
 
 def test_a_run_trained_on_other_numerics_is_evaluated_and_marked(trained_run, tmp_path, capsys):
@@ -732,11 +738,11 @@ def test_a_run_trained_on_other_numerics_is_evaluated_and_marked(trained_run, tm
         _as_if_trained_on(tmp_path / "runs" / "myscene" / f"ppo_seed{seed}", sub_steps=4,
                           resolution=12.0, accuracy=None, n_sub=None)
     sc = rolling_env.scenes.load_scene(str(scene))
-    assert sc.sub_steps == "auto" and sc.n_sub != 4 and sc.resolution == 16
+    assert sc.sub_steps == "auto" and sc.n_sub != 4 and sc.resolution == 64
     out = tmp_path / "out"
     assert evaluate_main(["--scenes", str(scene), "--runs", str(tmp_path / "runs"),
                           "--episodes", "1", "--out", str(out)]) == 0
-    note = f"sub_steps 4 (now auto: {sc.n_sub}), resolution 12 (now 16)"
+    note = f"sub_steps 4 (now auto: {sc.n_sub}), resolution 12 (now 64)"
     err = capsys.readouterr().err
     assert err.count("trained on other numerics") == 2 and note in err, err
     with open(out / "comparison.csv") as f:

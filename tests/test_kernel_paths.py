@@ -540,8 +540,8 @@ def test_no_content_outside_the_contact(scene, resolution):
     core.seed(3)
     core.reset()
     rng = np.random.default_rng(11)
-    n = core.cells.shape[2]
-    dx, x_lo = core.p[0, K.P_DX], core.p[0, K.P_X_LO]
+    n_all = core.cells.shape[2]
+    x_lo, levels = core.p[0, K.P_X_LO], int(core.p[0, K.P_LEVELS])
     assert core.max_episode_steps >= 400, "the run must not cross an episode end"
     for t in range(400):
         a = rng.uniform(-1, 1, (32, 3))
@@ -549,9 +549,11 @@ def test_no_content_outside_the_contact(scene, resolution):
         core.step(a)
         for e in range(32):
             c, half = core.st[e, K.ST_C], core.st[e, K.ST_A]
+            lv = int(core.st[e, K.ST_LEVEL])  # the level grid's cells in use
+            dx, n = core.p[e, K.P_DX] / 2 ** lv, n_all >> (levels - lv)
             U = core.cells[e, K.W_U]
             i0, i1 = K._contact_range(c, half, x_lo, dx, n) if half > 0 else (n, -1)
-            outside = np.r_[U[:i0], U[i1 + 1:]]
+            outside = np.r_[U[:i0], U[i1 + 1:]]  # the finer levels' cells beyond n too
             assert not np.any(outside), (f"tick {t}, env {e}: content {outside[outside != 0]!r} "
                                          f"outside the contact cells {i0}..{i1} (c = {c!r}, "
                                          f"a = {half!r}, dx = {dx!r})")
