@@ -686,7 +686,7 @@ def report(res) -> str:
          f"{TOP_ROUNDS} for the batched-vs-single table), so that a burst of the shared "
          "host's load hits them alike.", "",
          "## Single env through gym.make (pre-sampled actions) vs Pendulum-v1", "",
-         "| scene | steps/s | Pendulum-v1 steps/s | ratio (target >= 0.3) |", "|---|---|---|---|"]
+         "| scene | steps/s | Pendulum-v1 steps/s | ratio (target >= 1, at least 0.25) |", "|---|---|---|---|"]
     L += [f"| {r['scene']} | {r['steps_per_s']:,.0f} | {r['pendulum']:,.0f} | {r['ratio']:.2f} |"
           for r in res["env"]]
     L += ["", "## Kernel throughput (64 envs, serial kernel, random actions)", "",
@@ -730,7 +730,7 @@ def report(res) -> str:
           "Every timed pass spans whole episodes, so each holds the resets at the rate "
           "training meets them: the batched passes reset every env once per episode, the "
           "single env's pass of many episodes its own.", "",
-          "| | aggregate env steps/s | vs single env (target >= 10x) |", "|---|---|---|",
+          "| | aggregate env steps/s | vs single env (target >= 8x) |", "|---|---|---|",
           f"| single env (gym.make) | {b['single']:,.0f} | 1.00x |",
           f"| batched core, serial kernel | {b['serial']:,.0f} | "
           f"{b['serial'] / b['single']:.2f}x |",
