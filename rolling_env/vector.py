@@ -82,9 +82,10 @@ def _check_memory(n: int, cell_bytes: int, scene) -> None:
     if need > have:
         raise ValueError(
             f"num_envs = {n} envs x {cell_bytes / 2**20:.3g} MiB of cell state each "
-            f"(resolution = {scene.resolution!r}, stroke_roll = {scene.stroke_roll!r}) need "
-            f"{need / 2**30:.3g} GiB, more than this machine's {have / 2**30:.3g} GiB: "
-            "lower num_envs, or the scene's resolution or stroke")
+            f"(resolution = {scene.resolution!r}, grid_levels = {scene.grid_levels!r}, "
+            f"stroke_roll = {scene.stroke_roll!r}) need {need / 2**30:.3g} GiB, more than this "
+            f"machine's {have / 2**30:.3g} GiB: lower num_envs, or the scene's resolution, "
+            "grid_levels or stroke")
 
 
 def max_threads() -> int:

@@ -523,5 +523,6 @@ def test_a_batch_beyond_the_machine_memory_names_num_envs():
     """numpy's "Unable to allocate 7.9 PiB" named neither num_envs nor the scene keys that
     size an env's cells; checked before anything is allocated."""
     with pytest.raises(ValueError, match=r"^num_envs = 1000000000000 envs x .* MiB of cell "
-                                         r"state each \(resolution = 16.0, stroke_roll"):
+                                         r"state each \(resolution = 16.0, grid_levels = 4, "
+                                         r"stroke_roll"):
         BatchCore(10**12)
