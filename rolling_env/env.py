@@ -244,7 +244,8 @@ def build_drive(scene: Scene) -> tuple[Drive, float]:
             f"scene '{sc.name}' cannot be built: {e} (the env builds the drive from the scene "
             f"keys: stroke = +-stroke_roll = {sc.stroke_roll:g} m, a_ref = a_max = the contact "
             f"radius at N_max = {sc.N_max:g} N ({a_max:.3g} m), resolution = "
-            f"{sc.resolution:g}, t_ref = period = {sc.period:g} s, m = runner_mass)") from None
+            f"{sc.resolution:g}, levels = grid_levels = {sc.grid_levels}, t_ref = period = "
+            f"{sc.period:g} s, m = runner_mass)") from None
     return drive, a_max
 
 

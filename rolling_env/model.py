@@ -175,11 +175,12 @@ class Drive(CellViews):
         self.grid = Grid(stroke[0] / self.L0, stroke[1] / self.L0, a_max / self.L0, dx / self.L0,
                          grid_offset)
         n = self.grid.n
-        if n > 20_000_000:
-            raise ValueError(f"the spring row would need {n} cells (> 2e7) to cover the stroke "
-                             f"{stroke[1] - stroke[0]:.3g} m at {resolution:g} cells per a_ref: "
-                             "lower the resolution or the stroke (rolling amplitude)")
         self.levels = check_int("levels", levels, 0, LEVELS_MAX)
+        if n << self.levels > 20_000_000:
+            raise ValueError(f"the spring row would need {n << self.levels} cells (> 2e7) to "
+                             f"cover the stroke {stroke[1] - stroke[0]:.3g} m at {resolution:g} "
+                             f"cells per a_ref and {self.levels} finer levels: lower the "
+                             "resolution, the levels or the stroke (rolling amplitude)")
         self._p = np.array([params.R / self.L0, params.E_star / params.G_star,
                             self.grid.x_lo, self.grid.dx, float(self.levels)])
         finite_mu, free, load = params.features
