@@ -72,15 +72,17 @@ def _interleaved_rates(runs: dict, total: int, segment: int) -> dict:
     until each has made ``total``: every entry meets the same stretches of the host's load,
     and the rate counts all its steps (a choice made at run time pays for its probes).  On
     a shared host whose load changes within seconds, the best passes of whole rounds gave
-    two entries running the same kernel rates 2x apart.  ``runs[name](k)`` makes the next k
-    steps and returns the env steps made."""
+    two entries running the same kernel rates 2x apart.  The order changes each round
+    (``_orders``), and each segment is followed by an untimed pause (``SEGMENT_PAUSE``).  ``runs[name](k)`` makes the next
+    k steps and returns the env steps made."""
     spent = dict.fromkeys(runs, 0.0)
     made = dict.fromkeys(runs, 0)
-    for start in range(0, total, segment):
+    orders = _orders(runs)
+    for r, start in enumerate(range(0, total, segment)):
         k = min(segment, total - start)
-        for name, run in runs.items():
+        for name in orders[r % len(orders)]:
             t = time.perf_counter()
-            made[name] += run(k)
+            made[name] += runs[name](k)
             spent[name] += time.perf_counter() - t
             time.sleep(SEGMENT_PAUSE)
     return {name: made[name] / spent[name] for name in runs}
@@ -88,8 +90,15 @@ def _interleaved_rates(runs: dict, total: int, segment: int) -> dict:
 
 # untimed pause after each segment: OpenMP's worker threads spin for some milliseconds after
 # a threaded step, and would slow the next entry's first steps (a neighbour that a user's
-# single env does not have)
-SEGMENT_PAUSE = 0.02
+# single env does not have); the order of the entries changes each round as well
+SEGMENT_PAUSE = 0.05
+
+
+def _orders(names) -> list:
+    """The orders in which ``_interleaved_rates`` takes the entries, round after round:
+    every permutation in turn, so that each entry follows each other one equally often."""
+    import itertools
+    return list(itertools.permutations(names))
 
 
 def _segment(n_envs: int) -> int:
@@ -170,24 +179,6 @@ def _core_runner(core, ticks, seed=0):
                 core.reset(tr)
             at[0] = (at[0] + 1) % ticks
         return k * core.num_envs
-    return run
-
-
-def _vec_runner(step, n_envs, ticks, seed=0, between=None):
-    """A vector env adapter's steps in segments (for ``_interleaved_rates``), as
-    ``_vec_pass`` takes them (``between``: the calling thread's work after each step)."""
-    acts = np.random.default_rng(seed).uniform(-1, 1, (ticks, n_envs, 3)).astype(np.float32)
-    for a in acts[:20]:
-        step(a)
-    at = [0]
-
-    def run(k):
-        for _ in range(k):
-            r = step(acts[at[0]])
-            if between is not None:
-                between(r)
-            at[0] = (at[0] + 1) % ticks
-        return k * n_envs
     return run
 
 
@@ -408,27 +399,162 @@ class _Competitor:
         return False
 
 
-def _policy_work(n_envs: int, seconds: float):
-    """Work of the calling thread between steps, as a policy's forward pass would do: a
-    (n_envs, 64) layer of element-wise numpy (one thread: no BLAS threads of its own), its
-    repetitions chosen to take about ``seconds`` on this host now.  Returns (work(result),
-    seconds of one call as measured)."""
-    h = np.empty((n_envs, 64))
-    w = np.linspace(-1.0, 1.0, 64)
-
-    def layer(obs):
-        np.multiply(obs[:, :1], w, out=h)
-        np.tanh(h, out=h)
-
-    obs = np.zeros((n_envs, 13), dtype=np.float32)
-    one = min(_time_once(lambda: layer(obs)) for _ in range(20))
-    reps = max(1, round(seconds / one))
-
-    def work(result):
-        o = result[0]
+_LOAD_WORKER = """
+import sys, time
+import numpy as np
+kind, n, ticks = {kind!r}, {n}, {ticks}
+if kind in ("batched", "dummy"):  # the SB3 training envs
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
+    import rolling_env
+    from rolling_env.sb3_vec import RollingDriveVecEnv
+    venv = (RollingDriveVecEnv(n) if kind == "batched" else
+            DummyVecEnv([lambda: rolling_env.make("default") for _ in range(n)]))
+    env = VecMonitor(venv)
+    env.seed(0)
+    env.reset()
+    core = getattr(venv, "core", None)
+else:  # gym.make_vec with num_threads = kind
+    import gymnasium as gym
+    import rolling_env
+    env = gym.make_vec("RollingDrive-v0", num_envs=n,
+                       num_threads=None if kind == "None" else int(kind))
+    env.reset(seed=0)
+    core = env.unwrapped.core
+acts = np.random.default_rng(0).uniform(-1, 1, (ticks, n, 3)).astype(np.float32)
+h = np.empty((n, 64))
+w = np.linspace(-1.0, 1.0, 64)
+def layer(obs):  # a policy's layer: element-wise numpy, one thread
+    np.multiply(obs[:, :1], w, out=h)
+    np.tanh(h, out=h)
+at = 0
+def run(k, reps):
+    global at
+    t = time.perf_counter()
+    for _ in range(k):
+        obs = env.step(acts[at])[0]
+        at = (at + 1) % ticks
         for _ in range(reps):
-            layer(o)
-    return work, reps * one
+            layer(obs)
+    return time.perf_counter() - t
+def layer_seconds():
+    obs = acts[0][:, :1].repeat(13, axis=1)
+    best = 1.0
+    for _ in range(20):
+        t = time.perf_counter()
+        layer(obs)
+        best = min(best, time.perf_counter() - t)
+    return best
+run(40, 0)  # kernels loaded, the default's first choice made
+print("ready", layer_seconds(), flush=True)
+for line in sys.stdin:
+    cmd = line.split()
+    if not cmd or cmd[0] != "go":
+        break
+    print(run(int(cmd[1]), int(cmd[2])), core.threads if core is not None else 0, flush=True)
+"""
+
+
+class _Workers:
+    """Envs each in its own process, as a training process would hold one (so that no env
+    meets another's threads), stepped on command one at a time: ``go(name, k, reps)`` makes
+    k steps, each followed by ``reps`` layers of a policy's numpy work, and returns the
+    seconds they took and the thread count the env then steps on."""
+
+    def __init__(self, kinds: dict, n_envs: int, ticks: int):
+        self.procs = {}
+        try:
+            for name, kind in kinds.items():
+                code = _LOAD_WORKER.format(kind=kind, n=n_envs, ticks=ticks)
+                self.procs[name] = subprocess.Popen([sys.executable, "-c", code],
+                                                    stdin=subprocess.PIPE,
+                                                    stdout=subprocess.PIPE, text=True)
+            self.layer_seconds = {}
+            for name, p in self.procs.items():
+                word, *rest = (p.stdout.readline().split() or ["failed"])
+                if word != "ready":
+                    raise RuntimeError(f"the benchmark worker {name!r} failed to start")
+                self.layer_seconds[name] = float(rest[0])
+        except BaseException:
+            self.close()
+            raise
+
+    def go(self, name: str, k: int, reps: int = 0):
+        p = self.procs[name]
+        p.stdin.write(f"go {k} {reps}\n")
+        p.stdin.flush()
+        seconds, threads = p.stdout.readline().split()
+        return float(seconds), int(threads)
+
+    def rates(self, names, n_envs: int, total: int, segment: int, reps: int = 0) -> dict:
+        """Env steps/s of each worker of ``names``, taken in turn in segments of ``segment``
+        steps until each has made ``total`` (orders and pauses as ``_interleaved_rates``)."""
+        spent = dict.fromkeys(names, 0.0)
+        orders = _orders(names)
+        for r, start in enumerate(range(0, total, segment)):
+            k = min(segment, total - start)
+            for name in orders[r % len(orders)]:
+                spent[name] += self.go(name, k, reps)[0]
+                time.sleep(SEGMENT_PAUSE)
+        return {name: total * n_envs / spent[name] for name in names}
+
+    def close(self):
+        for p in self.procs.values():
+            p.kill()
+            p.wait()
+
+
+def threads_under_load(n_envs=256, ticks=200, sb3_envs=8, sb3_ticks=2000,
+                       conditions=LOAD_CONDITIONS):
+    """``gym.make_vec("RollingDrive-v0", num_envs=n_envs)`` with its default threading
+    (``num_threads=None``) against the same env on the serial kernel (``num_threads=1``) and
+    on all threads, in each condition: ``idle`` (nothing else of ours running), ``busy`` (a
+    competing busy process, ``BUSY_CODE``), ``work`` (the env's thread does a policy's
+    worth of numpy between steps, about as long as a serial step) and ``busy+work``.  Each
+    env lives in its own process (``_Workers``) through all conditions in turn, so the
+    default must follow the load as it changes; the three are taken in turn in short
+    segments, so that they meet the same stretches of the host's load.  In the conditions
+    without work, also the SB3 training env at ``sb3_envs`` envs: the batched
+    ``RollingDriveVecEnv`` (default threading) vs a ``DummyVecEnv`` of single envs, both in
+    ``VecMonitor``."""
+    from .scenes import load_scene
+    from .vector import max_threads
+
+    episode = load_scene().episode_steps  # the default scene's
+    most = max_threads()
+    ticks = _whole_episodes(ticks, episode)
+    sb3_ticks = _whole_episodes(max(sb3_ticks // sb3_envs, 200), episode)
+    envs = _Workers({"serial": "1", "threads": str(most), "default": "None"}, n_envs, ticks)
+    try:
+        sb3 = _Workers({"batched": "batched", "dummy": "dummy"}, sb3_envs, sb3_ticks)
+    except BaseException:
+        envs.close()
+        raise
+    try:
+        seg = _LOAD_SEGMENT * 256 // n_envs or 1
+        step_s = envs.go("serial", 4 * seg)[0] / (4 * seg)
+        reps = max(1, round(step_s / envs.layer_seconds["serial"]))
+        rows = []
+        for cond in conditions:
+            load = _load_average()
+            with _Competitor("busy" in cond):
+                r = envs.rates(("serial", "threads", "default"), n_envs, TOP_ROUNDS * ticks,
+                               seg, reps if "work" in cond else 0)
+                row = dict(condition=cond, **r, load_average=load,
+                           default_threads=envs.go("default", 1)[1])
+                if "work" not in cond:
+                    s3 = sb3.rates(("batched", "dummy"), sb3_envs, TOP_ROUNDS * sb3_ticks,
+                                   max(16, 2048 // sb3_envs))
+                    row.update(sb3_batched=s3["batched"], sb3_dummy=s3["dummy"])
+            rows.append(row)
+    finally:
+        envs.close()
+        sb3.close()
+    return dict(num_envs=n_envs, threads=most, sb3_envs=sb3_envs, segment=seg,
+                work_seconds=reps * envs.layer_seconds["serial"], serial_step_seconds=step_s,
+                rows=rows)
+
+
+_LOAD_SEGMENT = 32  # steps of 256 envs in one segment of the load table (more for fewer envs)
 
 
 def _load_average() -> float:
@@ -438,69 +564,6 @@ def _load_average() -> float:
         return os.getloadavg()[0]
     except (AttributeError, OSError):
         return math.nan
-
-
-def _time_once(fn) -> float:
-    t = time.perf_counter()
-    fn()
-    return time.perf_counter() - t
-
-
-def threads_under_load(n_envs=256, ticks=200, sb3_envs=8, sb3_ticks=2000,
-                       conditions=LOAD_CONDITIONS):
-    """``gym.make_vec("RollingDrive-v0", num_envs=n_envs)`` with its default threading
-    (``num_threads=None``) against the same env on the serial kernel (``num_threads=1``) and
-    on all threads, in each condition: ``idle`` (nothing else of ours running), ``busy`` (a
-    competing busy process, ``BUSY_CODE``), ``work`` (the calling thread does a policy's
-    worth of numpy between steps, about as long as a serial step) and ``busy+work``.  The
-    same three envs run through all conditions in turn, so the default must follow the
-    load as it changes.  In the conditions without work, also the SB3 training env at
-    ``sb3_envs`` envs: the batched ``RollingDriveVecEnv`` (default threading) vs a
-    ``DummyVecEnv`` of single envs, both in ``VecMonitor``."""
-    import gymnasium as gym
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor
-
-    import rolling_env
-    from .sb3_vec import RollingDriveVecEnv
-    from .scenes import load_scene
-    from .vector import max_threads
-
-    episode = load_scene().episode_steps  # the default scene's
-    most = max_threads()
-    envs = {}
-    for name, k in (("serial", 1), ("threads", most), ("default", None)):
-        envs[name] = gym.make_vec("RollingDrive-v0", num_envs=n_envs, num_threads=k)
-        envs[name].reset(seed=0)
-    ticks = _whole_episodes(ticks, episode)
-    step_s = n_envs / _vec_pass(envs["serial"].step, n_envs, ticks)()
-    work, work_s = _policy_work(n_envs, step_s)
-    sb3 = {"batched": VecMonitor(RollingDriveVecEnv(sb3_envs)),
-           "dummy": VecMonitor(DummyVecEnv([lambda: rolling_env.make("default")
-                                            for _ in range(sb3_envs)]))}
-    for venv in sb3.values():
-        venv.seed(0)
-        venv.reset()
-    sb3_ticks = _whole_episodes(max(sb3_ticks // sb3_envs, 200), episode)
-    rows = []
-    for cond in conditions:
-        between = work if "work" in cond else None
-        load = _load_average()
-        with _Competitor("busy" in cond):
-            r = _interleaved_rates({name: _vec_runner(e.step, n_envs, ticks, between=between)
-                                    for name, e in envs.items()},
-                                   TOP_ROUNDS * ticks, _segment(n_envs))
-            row = dict(condition=cond, **r, load_average=load,
-                       default_threads=envs["default"].unwrapped.core.threads)
-            if between is None:
-                s3 = _interleaved_rates({name: _vec_runner(v.step, sb3_envs, sb3_ticks)
-                                         for name, v in sb3.items()},
-                                        TOP_ROUNDS * sb3_ticks, _segment(sb3_envs))
-                row.update(sb3_batched=s3["batched"], sb3_dummy=s3["dummy"])
-        rows.append(row)
-    for e in envs.values():
-        e.close()
-    return dict(num_envs=n_envs, threads=most, sb3_envs=sb3_envs, work_seconds=work_s,
-                serial_step_seconds=step_s, rows=rows)
 
 
 _WORKER = """
@@ -531,8 +594,9 @@ for line in sys.stdin:
 def host_parallelism(n_envs=256, ticks=512, rounds=TOP_ROUNDS):
     """What the host's second core gives two independent processes: two worker processes
     step the serial kernel (``n_envs`` envs, ``ticks`` ticks a pass); in each round one of
-    them (each in turn) runs a pass alone, then both at once.  Returns the best rate alone, the best sum of the pair
-    and their ratio (2 on an idle 2-core host; what threads can reach at most)."""
+    them (each in turn) runs a pass alone, then both at once.  Returns the best rate alone,
+    the best sum of the pair and their ratio (2 on an idle 2-core host; what threads can
+    reach at most)."""
     code = _WORKER.format(n=n_envs, ticks=ticks)
     procs = [subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
                               stdout=subprocess.PIPE, text=True) for _ in range(2)]
@@ -852,10 +916,11 @@ def _load_section(ld, host, b) -> list:
              "work": "the calling thread's own work between steps",
              "busy+work": "both"}
     L = [f"## Threads on a busy host (`gym.make_vec`, {n} envs, default scene)", "",
-         "The same three envs in every condition, taken in turn in segments of "
-         f"{_segment(n)} steps until each has made {TOP_ROUNDS} episodes (rates: all steps "
-         "over all their time, so each env meets the same stretches of the host's load and "
-         "the default pays for its probes): the serial kernel (`num_threads=1`), "
+         "The same three envs in every condition, each in its own process (as a training "
+         "process would hold it), taken in turn (every order in turn, a pause after each) in segments "
+         f"of {ld['segment']} steps until each has made {TOP_ROUNDS} episodes (rates: all "
+         "steps over all their time, so each env meets the same stretches of the host's load "
+         "and the default pays for its probes): the serial kernel (`num_threads=1`), "
          f"the threaded kernel on {k} threads (`num_threads={k}`) and the default "
          "(`num_threads=None`), which picks between them step by step from measured step "
          "times and must follow each change of load.  The work between steps is a policy's "

@@ -159,31 +159,31 @@ class ThreadPolicy:
     kernel when ``num_threads`` is None; called like ``_envkernel.env_step_serial``).
 
     A step costs the kernel call plus the time until the next step starts: the Python work
-    between steps counts too, since threads that spin after a step slow it down on a busy
-    host; a time between steps longer than ``PAUSE`` step times is the caller's pause (a
-    learner's update, say) and counts as ``PAUSE`` step times.  A choice's step time is the
-    mean over its recent steps, at least ``WINDOW`` of them and at least ``SPAN`` seconds:
-    on a busy host threads run fast while the core is theirs and stall for a time slice
-    when it is not, so fewer steps say little.  The choice in use (``current``) is measured
-    as it runs, its estimate renewed every ``RENEW`` steps and after a step twice as long
-    as it.  Each other choice is probed
-    now and then: after untimed steps that pay for the switch (the first, and where threads
-    were left, those of the next ``SETTLE`` seconds: OpenMP's worker threads spin for a few
-    milliseconds after a threaded step, and on a busy host the steps right after it pay for
-    that), ``PROBE`` timed steps spanning ``SPAN`` seconds, fewer where they already cost
-    more than the probe may (a choice 100x slower is dropped after one).  The probed choice
-    is taken over when its estimate beats the current one.  A choice's next probe comes
-    ``max(MIN_STEPS, cost / (BUDGET * t))`` steps after its last, ``cost`` being what that
-    probe and the way back cost over staying on the current choice and ``t`` the current
-    step time (renewed with it), so probing a slower choice costs about ``BUDGET`` of the
-    time.  A choice that beats the current one by ``GUARD`` by the latest measures is likely
-    a gain: it is probed without the ``MIN_STEPS`` floor and with ``GUARD_BUDGET`` (what its
-    switches cost is soon made up); and for ``WINDOW`` steps after a switch the choice left
-    is probed at once if the new one runs ``GUARD`` times slower than it did (a lucky probe
-    costs a few steps).  Steps are counted, not clock time, so that the spacing holds
-    however long the caller pauses.  Thread counts change which thread computes an env,
-    never its result, so no switch changes a transition.  ``clock`` (seconds) can be
-    replaced, e.g. by a test, which may also drive ``next`` and ``done`` itself."""
+    between steps counts too, since threads that spin after a step slow it down on a busy host;
+    a time between steps longer than ``PAUSE`` step times is the caller's pause (a learner's
+    update, say) and counts as ``PAUSE`` step times.  A choice's step time is the mean over its
+    recent steps, at least ``WINDOW`` of them and at least ``SPAN`` seconds: on a busy host
+    threads run fast while the core is theirs and stall for a time slice when it is not, so
+    fewer steps say little.  The choice in use (``current``) is measured as it runs, its
+    estimate renewed every ``RENEW`` steps and after a step twice as long as it.  Each other
+    choice is probed now and then: after untimed steps that pay for the switch (the first, and
+    where threads were left, those until the steps run at the choice's pace again, ``SETTLE``
+    seconds at least: OpenMP's worker threads spin for a few milliseconds after a threaded
+    step, and on a busy host the steps right after it pay for that), ``PROBE`` timed steps
+    spanning ``SPAN`` seconds, fewer where they already cost more than the probe may (a choice
+    100x slower is dropped after one).  The probed choice is taken over when its estimate beats
+    the current one.  A choice's next probe comes ``max(MIN_STEPS, cost / (BUDGET * t))`` steps
+    after its last, ``cost`` being what that probe and the way back cost over staying on the
+    current choice and ``t`` the current step time (renewed with it), so probing a slower
+    choice costs about ``BUDGET`` of the time.  A choice that beats the current one by
+    ``GUARD`` by the latest measures is likely a gain: it is probed without the ``MIN_STEPS``
+    floor and with ``GUARD_BUDGET`` (what its switches cost is soon made up); and for
+    ``WINDOW`` steps after a switch the choice left is probed at once if the new one runs
+    ``GUARD`` times slower than it did (a lucky probe costs a few steps).  Steps are counted,
+    not clock time, so that the spacing holds however long the caller pauses.  Thread counts
+    change which thread computes an env, never its result, so no switch changes a transition.
+    ``clock`` (seconds) can be replaced, e.g. by a test, which may also drive ``next`` and
+    ``done`` itself."""
 
     PROBE = 4            # timed steps of a probe at least
     WINDOW = 16          # recent steps of the current choice kept at least
@@ -194,7 +194,8 @@ class ThreadPolicy:
     MIN_STEPS = 32       # steps between two probes of one choice at least
     GUARD = 1.25         # another choice this much faster than the current: probe it soon
     GUARD_BUDGET = 0.05  # most of the time its probes may cost then
-    SETTLE = 0.01        # seconds after leaving threads during which steps are not timed
+    SETTLE = 0.01        # seconds after leaving threads during which steps are not timed,
+                         # at least (see _settled)
     RETURNS = 5          # recent costs of the way back from a probe kept (their median counts)
 
     def __init__(self, choices, clock=time.perf_counter):
@@ -224,7 +225,8 @@ class ThreadPolicy:
         self._returns = deque(maxlen=self.RETURNS)  # excess seconds of the way back
         self._returning = None          # excess seconds of the way back so far, or None
         self._return_cost = 0.0         # the median of _returns
-        self._settle_end = -math.inf    # steps starting before this clock time: untimed
+        self._settle_end = None         # while threads left may spin: the earliest end
+        self._settle_limit = 0.0        # and the latest
         self._start = self._end = None  # clock at the previous step's start and end
         self._prev = self._before = -1  # choices of the previous step and the one before
 
@@ -242,7 +244,7 @@ class ThreadPolicy:
             t = self.estimate[self.current]
             gap = now - end
             step = end - self._start + (gap if not gap > self.PAUSE * t else self.PAUSE * t)
-            timed = prev == self._before and self._start >= self._settle_end
+            timed = prev == self._before and (self._settle_end is None or self._settled(step))
             if (timed and prev == self.current and self._returning is None
                     and self._watch is None):
                 self._add(step)  # the common case, kept short
@@ -315,6 +317,19 @@ class ThreadPolicy:
         ``new`` does not use have stopped spinning (the first step is untimed anyway)."""
         if self.choices[new] < self.choices[old]:
             self._settle_end = now + self.SETTLE
+            self._settle_limit = now + 10 * self.SETTLE
+
+    def _settled(self, step: float) -> bool:
+        """Whether the threads left have stopped spinning, by the last step (of the running
+        choice): ``SETTLE`` seconds have passed and the step took no more than ``GUARD``
+        times the choice's estimate; on a crowded host a spinning thread may have to wait
+        for a core before it spins on, so the wait ends at ``10 SETTLE`` at the latest."""
+        e = self.estimate[self._prev]
+        if self._start >= self._settle_limit or (self._start >= self._settle_end
+                                                 and not step > self.GUARD * e):
+            self._settle_end = None
+            return True
+        return False
 
     def _probe_too_dear(self, seconds: float, timed: int) -> bool:
         """The running probe's timed steps already cost more over the current choice than

@@ -73,7 +73,7 @@ def test_load_section_reports_ratios_of_the_same_run():
             dict(condition="busy", serial=80.0, threads=20.0, default=78.0, default_threads=1,
                  sb3_batched=60.0, sb3_dummy=20.0),
             dict(condition="work", serial=50.0, threads=55.0, default=54.0, default_threads=2)]
-    load = dict(num_envs=256, threads=2, sb3_envs=8, work_seconds=1e-3,
+    load = dict(num_envs=256, threads=2, sb3_envs=8, segment=32, work_seconds=1e-3,
                 serial_step_seconds=1.1e-3, rows=rows)
     host = dict(num_envs=256, alone=100.0, pair=190.0, ratio=1.9)
     sweep = {"sweep": [dict(num_envs=256, serial=100.0, threaded=170.0, default=168.0),
@@ -85,7 +85,19 @@ def test_load_section_reports_ratios_of_the_same_run():
     assert "reach 1.90x" in text and "1.70x at 256 envs, 1.85x at 1024 envs" in text, text
 
 
-def test_policy_work_runs_on_a_step_result():
-    work, seconds = bench._policy_work(16, 1e-4)
-    work((np.zeros((16, 13), dtype=np.float32), np.zeros(16)))
-    assert seconds > 0
+def test_load_workers_step_their_envs_on_command():
+    """The load table's envs, each in its own process: a step command makes its steps (the
+    policy's numpy work between them too) and says what the env steps on; the processes are
+    gone after close."""
+    w = bench._Workers({"serial": "1", "default": "None", "dummy": "dummy"}, 2, 16)
+    try:
+        assert set(w.layer_seconds) == {"serial", "default", "dummy"}
+        seconds, threads = w.go("serial", 5, 2)
+        assert seconds > 0 and threads == 1
+        assert w.go("default", 3)[1] == 1  # 2 envs: below the threads' minimum, serial
+        assert w.go("dummy", 3)[1] == 0  # a DummyVecEnv: no batch
+        rates = w.rates(("serial", "default"), 2, 8, 3)
+        assert set(rates) == {"serial", "default"} and all(v > 0 for v in rates.values())
+    finally:
+        w.close()
+    assert all(p.poll() is not None for p in w.procs.values())
