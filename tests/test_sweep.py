@@ -1,7 +1,7 @@
 """agents.sweep: grids and searches on Ray Tune, run for real on short budgets.
 
 The sweep file checks run without Ray; the sweeps themselves are skipped where Ray (the
-``sweep`` extra) is not installed.  Ray's session files go under pytest's temporary folder.
+``sweep`` extra) is not installed.  Ray's temporary files go under pytest's own.
 """
 from __future__ import annotations
 
@@ -38,12 +38,12 @@ def _grid(tmp_path, **kw) -> dict:
 
 @pytest.fixture(scope="module")
 def ray_tmp(tmp_path_factory):
-    """Ray's session files: a short path (its socket paths must stay under 108 bytes)."""
+    """Ray's temporary files: a short path (its socket paths must stay under 108 bytes)."""
     return tmp_path_factory.mktemp("ray")
 
 
 def _sweep(tmp_path, config: Path, *extra, ray_tmp=None, timeout=240):
-    """Run ``python -m agents.sweep`` as a user would (Ray's session files in ray_tmp)."""
+    """Run ``python -m agents.sweep`` as a user would (Ray's temporary files in ray_tmp)."""
     env = dict(os.environ, **({"RAY_TMPDIR": str(ray_tmp)} if ray_tmp else {}))
     if "--address" in extra:
         env = _joined(env)
