@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -53,7 +54,7 @@ class Eq32Design:
     slip_margin: float = 0.5
     delta_pref: float = 0.5
 
-    @property
+    @cached_property  # the design is frozen: computed once
     def a1(self) -> float:
         sc = self.scene
         d1 = analytic.hertz_indentation(sc.N_max, sc.R, sc.E_star)
@@ -88,17 +89,17 @@ class Eq32Design:
         w_stroke = 2 * min(sc.stroke_roll, sc.stroke_translate) / self.a1 * 0.98
         return w_rate, w_stroke
 
-    @property
+    @cached_property
     def w(self) -> float:
         """w_pref, lowered to what the rate and the strokes allow (never below 2: checked at
         construction)."""
         return min(self.w_pref, *self._w_limits())
 
-    @property
+    @cached_property
     def omega_R(self) -> float:
         return self.w * self.a1 / (self.half_ticks * self.scene.dt)
 
-    @property
+    @cached_property
     def creep_cap(self) -> float:
         """Largest creep ratio xi: the wearless window with finite friction, else creep_max."""
         sc = self.scene
@@ -107,11 +108,11 @@ class Eq32Design:
         limit = sc.mu * (sc.E_star / sc.G_star) * self.a1 ** 2 / sc.R  # slip limit at the centre
         return min(sc.creep_max, self.slip_margin * limit / (self.w * self.a1))
 
-    @property
+    @cached_property
     def delta_min(self) -> float:
         return (self.scene.N_min / self.scene.N_max) ** (2 / 3)
 
-    @property
+    @cached_property
     def v_max(self) -> float:
         """Fastest Eq. 32 velocity [m/s] of the family (largest creep, smallest delta)."""
         return float(analytic.eq32(self.delta_min, 1 - self.creep_cap, self.w)) * self.omega_R

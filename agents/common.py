@@ -147,6 +147,9 @@ def parse_kwargs(text) -> dict | None:
 #: RL Zoo keys the training script handles itself (the rest go to the algorithm's __init__)
 ZOO_KEYS = frozenset({"n_envs", "n_timesteps", "policy", "normalize", "env_kwargs",
                       "noise_type", "noise_std"})
+#: keys of this project's own (not RL Zoo's): a residual policy on an Eq. 32 baseline
+#: (``agents.residual``)
+RESIDUAL_KEYS = frozenset({"residual", "residual_scale"})
 #: keywords of the algorithms' __init__ that the script sets (or that YAML cannot express)
 _SET_BY_SCRIPT = {"env": "the env is built from --scene", "seed": "use --seed",
                   "verbose": "set by the script", "device": "set by the script (cpu)",
@@ -294,17 +297,19 @@ def check_hyperparams(algo: str, hp: dict) -> dict:
     with an integer value: ``1e3``, which ``rolling_env.scenes.read_yaml`` reads as a float),
     and the values inside ``policy_kwargs`` are checked too (``check_policy_kwargs``).  Returns
     ``{"n_envs", "n_timesteps", "policy", "normalize" (dict or None), "env_kwargs",
-    "action_noise" (None or a (type, std) pair), "kwargs" (for the algorithm)}``;
+    "action_noise" (None or a (type, std) pair), "residual" (None or a (base, scale) pair),
+    "kwargs" (for the algorithm)}``;
     ``n_timesteps`` is None when the entry has none."""
     import inspect
     import numbers
     cls = _algo_class(algo)
     params = inspect.signature(cls.__init__).parameters
-    unknown = sorted(k for k in hp if k not in ZOO_KEYS and k not in params or k == "self")
+    script = ZOO_KEYS | RESIDUAL_KEYS
+    unknown = sorted(k for k in hp if k not in script and k not in params or k == "self")
     if unknown:
         raise ValueError(f"unknown hyper-parameter(s) {', '.join(map(repr, unknown))} for "
-                         f"{cls.__name__} (keys: the RL Zoo keys {sorted(ZOO_KEYS)} and the "
-                         f"keywords of {cls.__name__}.__init__)")
+                         f"{cls.__name__} (keys: the RL Zoo keys {sorted(ZOO_KEYS)}, "
+                         f"{sorted(RESIDUAL_KEYS)} and the keywords of {cls.__name__}.__init__)")
     out = {"n_envs": _int("n_envs", hp.get("n_envs", 1)),
            "n_timesteps": (_int("n_timesteps", hp["n_timesteps"]) if "n_timesteps" in hp
                            else None)}
@@ -351,9 +356,20 @@ def check_hyperparams(algo: str, hp: dict) -> dict:
         out["action_noise"] = (noise_type, _number("noise_std", noise_std))
     else:
         out["action_noise"] = None
+    out["residual"] = None
+    if hp.get("residual") is not None:
+        from .residual import SCALE_DEFAULT, check_residual
+        try:
+            out["residual"] = check_residual(hp["residual"],
+                                             hp.get("residual_scale", SCALE_DEFAULT))
+        except ValueError as e:
+            raise ValueError(f"hyper-parameter {e}") from None
+    elif hp.get("residual_scale") is not None:
+        raise ValueError("hyper-parameter 'residual_scale' needs 'residual' (the baseline the "
+                         "policy's actions are added to)")
     kwargs = {}
     for k, v in hp.items():
-        if k in ZOO_KEYS:
+        if k in script:
             continue
         if k in _SET_BY_SCRIPT:
             raise ValueError(f"hyper-parameter {k!r} cannot be set in the YAML: "
@@ -541,6 +557,11 @@ def save_model(model, vecnorm, folder: str | os.PathLike, name: str = "model") -
 #: (``numerics_note``); a difference in any other key refuses it.
 NUMERICS_KEYS = ("sub_steps", "resolution", "accuracy", "grid_levels", "n_sub")
 
+#: the reward's weights: they shape what an agent learns from, not what the comparison scores
+#: (final error and slip work), so a run trained with other weights (``env_kwargs``, e.g.
+#: ``w_final``) is evaluated on the plain scene and marked like one trained on other numerics
+REWARD_KEYS = ("w_track", "w_wear", "w_final")
+
 #: numerics keys added after runs were recorded, with the value in effect before each existed
 #: (where that differs from the key's default): one fixed grid before the level grid
 BEFORE_KEY = {"grid_levels": 0}
@@ -598,12 +619,13 @@ def _sub_steps_text(fields: dict) -> str:
 
 
 def numerics_note(trained: dict, now: dict) -> str:
-    """What differs between two ``scene_fields`` in ``NUMERICS_KEYS``, for the tables:
-    ``sub_steps 8 (now auto: 23), resolution 16 (now 32)``; "" where nothing does."""
+    """What differs between two ``scene_fields`` in ``NUMERICS_KEYS`` and ``REWARD_KEYS``, for
+    the tables: ``sub_steps 8 (now auto: 23), resolution 16 (now 32)``; "" where nothing
+    does."""
     parts = []
     if any(trained.get(k) != now.get(k) for k in ("sub_steps", "n_sub")):
         parts.append(f"sub_steps {_sub_steps_text(trained)} (now {_sub_steps_text(now)})")
-    for k in ("resolution", "accuracy", "grid_levels"):
+    for k in ("resolution", "accuracy", "grid_levels") + REWARD_KEYS:
         if trained.get(k) != now.get(k):
             parts.append(f"{k} {trained.get(k, '-'):g} (now {now.get(k, '-'):g})"
                          if isinstance(trained.get(k), (int, float))

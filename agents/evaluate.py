@@ -104,9 +104,11 @@ def model_algo(path) -> str:
                      f"{module or 'missing'!r}; this script loads PPO, SAC and TD3 models)")
 
 
-def load_agent(path, env=None) -> NormalizedAgent:
+def load_agent(path, env=None, base_scene=None):
     """Load ``<name>.zip`` and, if beside it, ``<name>_vecnormalize.pkl`` (observation
-    statistics applied, frozen).  The algorithm is read from the zip (``model_algo``) and
+    statistics applied, frozen): a ``NormalizedAgent``, or for a residual run (its config.yml
+    names the baseline) a ``residual.ResidualAgent`` acting with its baseline, which is built
+    for ``base_scene`` (default: the scene of ``env``, else the run's).  The algorithm is read from the zip (``model_algo``) and
     checked against the run's config.yml where there is one.  A model without statistics is
     refused where its run's config.yml says the run normalised observations, and loaded with
     a warning where there is no config.yml to tell."""
@@ -114,6 +116,7 @@ def load_agent(path, env=None) -> NormalizedAgent:
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     from .common import parse_kwargs
+    from .residual import ResidualAgent, ResidualVecEnv
 
     path = Path(path)
     cfg_path = path.parent / "config.yml"
@@ -129,11 +132,14 @@ def load_agent(path, env=None) -> NormalizedAgent:
         raise _load_error(path, e) from None
     stats = path.with_name(path.stem + "_vecnormalize.pkl")
     vecnorm = None
+    residual = _residual_of(cfg, path)
     if stats.exists():
         scene = env.unwrapped.scene if env is not None else "default"
+        venv = DummyVecEnv([lambda: rolling_env.make(scene)])
+        if residual is not None:  # the statistics are of the augmented observation
+            venv = ResidualVecEnv(venv, *residual)
         try:
-            vecnorm = VecNormalize.load(str(stats),
-                                        DummyVecEnv([lambda: rolling_env.make(scene)]))
+            vecnorm = VecNormalize.load(str(stats), venv)
         except Exception as e:  # noqa: BLE001  (truncated: UnpicklingError, EOFError, ...)
             raise _load_error(stats, e) from None
         if not isinstance(vecnorm, VecNormalize):  # another object pickled under the name
@@ -159,7 +165,30 @@ def load_agent(path, env=None) -> NormalizedAgent:
         print(f"warning: {path} has no {stats.name} beside it and no config.yml: observations "
               "are fed unnormalised; if the run used VecNormalize (agents.train does by "
               "default), copy its statistics beside the model", file=sys.stderr)
-    return NormalizedAgent(model, vecnorm)
+    agent = NormalizedAgent(model, vecnorm)
+    if residual is not None:
+        scene = base_scene if base_scene is not None else (
+            env.unwrapped.scene if env is not None else _trained_scene(cfg))
+        return ResidualAgent(agent, *residual, scene)
+    return agent
+
+
+def _residual_of(cfg: dict | None, path: Path):
+    """(base, scale) of a residual run from its config.yml, None for a plain one."""
+    if not cfg or cfg.get("residual") is None:
+        return None
+    from .residual import SCALE_DEFAULT, check_residual
+    try:
+        return check_residual(cfg["residual"], cfg.get("residual_scale", SCALE_DEFAULT))
+    except ValueError as e:
+        raise ValueError(f"{path.parent / 'config.yml'}: {e}") from None
+
+
+def _trained_scene(cfg: dict):
+    """The scene a run was trained on, from its config.yml."""
+    from rolling_env.scenes import load_scene
+    extra = {k: v for k, v in dict(cfg.get("env_kwargs") or {}).items() if k != "scene"}
+    return load_scene(cfg.get("scene", "default"), **extra)
 
 
 #: which model of a run ``--model`` evaluates: the final one (``model.zip``, RL Zoo's default)
@@ -232,8 +261,8 @@ def check_run_scene(run: Path, scene, by_key: bool = True) -> str:
     is checked by the scene's name, with a warning."""
     from rolling_env.scenes import Scene
 
-    from .common import (NUMERICS_KEYS, completed_fields, differing_fields, fields_digest,
-                         numerics_note, scene_fields, scene_key)
+    from .common import (NUMERICS_KEYS, REWARD_KEYS, completed_fields, differing_fields,
+                         fields_digest, numerics_note, scene_fields, scene_key)
     cfg = run_config(run)  # a damaged config.yml: a ValueError naming it
     if cfg is None:
         return ""
@@ -247,7 +276,8 @@ def check_run_scene(run: Path, scene, by_key: bool = True) -> str:
                              f"({trained}), not {key!r}: use it on its own scene (evaluate "
                              f"looks for it under <runs>/{trained_key}/)")
     name = scene.name if isinstance(scene, Scene) else str(scene)
-    extra = {k: v for k, v in dict(cfg.get("env_kwargs") or {}).items() if k != "scene"}
+    extra = {k: v for k, v in dict(cfg.get("env_kwargs") or {}).items()
+             if k != "scene" and k not in REWARD_KEYS}
     if extra:
         raise ValueError(f"run {str(run)!r} was trained with scene overrides {extra}: it is not "
                          f"comparable on the plain scene {name!r}; put the overrides in a "
@@ -263,14 +293,15 @@ def check_run_scene(run: Path, scene, by_key: bool = True) -> str:
     trusted = bool(recorded) and fields_digest(recorded) == digest
     full = completed_fields(recorded) if trusted else recorded
     differ = [k for k in set(full) | set(now) if full.get(k, "-") != now.get(k, "-")]
-    if not trusted or any(k not in NUMERICS_KEYS for k in differ):
+    if not trusted or any(k not in NUMERICS_KEYS + REWARD_KEYS for k in differ):
         diff = differing_fields(full, now)
         raise ValueError(f"run {str(run)!r} was trained on a scene whose content differs from "
                          f"{name!r} (trained vs now: {diff or 'scene digest differs'}): not "
                          "comparable")
     note = numerics_note(full, now)
     if note:
-        print(f"warning: {run} was trained on other numerics of scene {name!r} ({note}; the "
+        print(f"warning: {run} was trained on other numerics or reward weights of scene "
+              f"{name!r} ({note}; the "
               "physics and task keys are equal): it is evaluated as it is, on the scene's "
               "numerics as they are now", file=sys.stderr)
     return note
@@ -353,6 +384,8 @@ def evaluate_scene(scene: str, runs: Path, episodes: int, env=None,
                "model_file": getattr(ctrl, "file", "-"), "episodes": len(per),
                "episode_steps": env.unwrapped.scene.episode_steps,
                "episode_seconds": env.unwrapped.scene.episode_steps * env.unwrapped.scene.dt}
+        for key in ("final_abs_error", "slip_work"):  # per episode, for the statistics
+            row[f"episode_{key}"] = [float(p[key]) for p in per]
         for key in ("final_abs_error", "rms_error", "slip_work", "return"):
             vals = np.array([p[key] for p in per])
             row[f"{key}_mean"] = float(vals.mean())
@@ -568,7 +601,7 @@ def write_tables(rows: list[dict], out: Path, episodes: int | None = None,
             f"{100 * r['reached_fraction']:.0f}% | {_fmt_settle(r['settle_time_mean'])} | "
             f"{r['slip_work_mean'] * 1e9:.3g} ± {r['slip_work_std'] * 1e9:.2g} | {budget} |")
     if marks:
-        lines += [""] + [f"* [{k}] trained on other numerics: {note}" for note, k in marks.items()]
+        lines += [""] + [f"* [{k}] trained on other numerics or reward weights: {note}" for note, k in marks.items()]
     verdicts = goal_verdicts(rows)
     if verdicts:
         lines += ["", "## The goal: at most half the best baseline's final error at no more slip "
@@ -600,7 +633,28 @@ def write_tables(rows: list[dict], out: Path, episodes: int | None = None,
                          f"({g['error_min']:.2f}-{g['error_max']:.2f}) | "
                          f"{g['slip_mean'] * 1e9:.3g} ({g['slip_min'] * 1e9:.3g}-"
                          f"{g['slip_max'] * 1e9:.3g}) | {g['met']} of {g['judged']} |")
+    if any(r["controller"] not in BASELINES for r in rows) and all(
+            "episode_final_abs_error" in r for r in rows):
+        from . import stats as S
+        st = S.seed_statistics(rows)
+        lines += [""] + S.markdown(st, marks)
+        (out / "plots").mkdir(parents=True, exist_ok=True)
+        S.plot_intervals(st, out / "plots" / "intervals.png")
+        lines += ["", "![IQM final error with 95% intervals](plots/intervals.png)"]
+        write_episodes(rows, out / "comparison_episodes.csv")
     atomic_write(out / "comparison.md", lambda p: Path(p).write_text("\n".join(lines) + "\n"))
+
+
+def write_episodes(rows: list[dict], path: Path) -> None:
+    """Every controller's per-episode final |error| / tolerance and slip work [J]: the data
+    of the statistics over seeds and targets."""
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["scene", "controller", "episode", "final_abs_error_tol", "slip_work"])
+    for r in rows:
+        for i, (e, sw) in enumerate(zip(r["episode_final_abs_error"], r["episode_slip_work"])):
+            w.writerow([r["scene"], r["controller"], i, repr(e / r["tolerance"]), repr(sw)])
+    atomic_write(path, lambda p: Path(p).write_text(buf.getvalue()))
 
 
 def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path,
@@ -654,7 +708,7 @@ def plot_scene(scene: str, runs: Path, trajectories: dict, out: Path,
     shown = sorted({marks[n]: n for n in notes.values()}.items())
     if shown:  # which numerics the marked agents were trained on, under the panels
         fig.subplots_adjust(bottom=0.2)
-        fig.text(0.01, 0.01, "; ".join(f"[{k}] trained on other numerics: {n}"
+        fig.text(0.01, 0.01, "; ".join(f"[{k}] trained with other numerics or reward weights: {n}"
                                        for k, n in shown), fontsize=8, va="bottom")
     path = atomic_write(out / "plots" / f"{scene_key(scene)}.png",
                         lambda p: fig.savefig(p, dpi=80, format="png"))

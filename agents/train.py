@@ -37,6 +37,9 @@ import yaml
 
 from rolling_env.cli import positive_int
 
+from .residual import BASES as RESIDUAL_BASES
+from .residual import SCALE_DEFAULT as RESIDUAL_SCALE
+from .residual import ResidualVecEnv
 from .common import (ALGOS, action_noise, atomic_write, buildable_scene, check_hyperparams,
                      check_policy, load_hyperparams, make_vec_env, save_model, scene_digest,
                      scene_fields, scene_key)
@@ -92,6 +95,13 @@ def build_parser():
                    "single envs, or auto (default): whichever steps faster here, measured for "
                    "about a second at start and recorded in meta.json (both give the same "
                    "transitions)")
+    p.add_argument("--residual", choices=sorted(RESIDUAL_BASES), default=None,
+                   help="train a residual policy: its action, times --residual-scale, is added "
+                   "to this baseline's (overrides the hyper-parameter entry's 'residual'; "
+                   "the run folder is named <algo>-residual_seed<N>)")
+    p.add_argument("--residual-scale", type=float, default=None,
+                   help=f"how far the residual policy moves each action, in (0, 2] "
+                   f"(default: the entry's residual_scale, else {RESIDUAL_SCALE})")
     p.add_argument("--num-threads", type=num_threads_arg, default=None,
                    help="numba threads of the batched env: auto (default: the serial or "
                    "the threaded kernel, chosen step by step from measured step times) or "
@@ -228,6 +238,10 @@ def _setup(args, command=None):
         raise ValueError(f"--scene: {e}") from None
     key = scene_key(scene)
     hp = load_hyperparams(args.algo, key, args.conf)
+    if args.residual is not None:
+        hp["residual"] = args.residual
+    if args.residual_scale is not None:
+        hp["residual_scale"] = args.residual_scale
     if args.n_timesteps is None and "n_timesteps" not in hp:
         raise KeyError("n_timesteps")
     checked = check_hyperparams(args.algo, hp)  # every key used or refused, naming it
@@ -246,7 +260,13 @@ def _setup(args, command=None):
     vec_env["num_threads"] = "auto" if args.num_threads is None else args.num_threads
     check_policy(args.algo, checked["kwargs"], env)  # torch's errors named policy_kwargs
     eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs)
-    run = Path(args.run_dir or f"runs/{key}/{args.algo}_seed{args.seed}")
+    residual = checked["residual"]
+    if residual is not None:  # the policy's action is added to a baseline's
+        env = ResidualVecEnv(env, *residual)
+        eval_env = ResidualVecEnv(eval_env, *residual)
+        hp = dict(hp, residual=residual[0], residual_scale=residual[1])
+    name = args.algo + ("-residual" if residual is not None else "")
+    run = Path(args.run_dir or f"runs/{key}/{name}_seed{args.seed}")
     work = run  # the folder trained into: the run folder, or its staging folder
     if run.is_symlink() or (run.exists() and (not run.is_dir() or any(run.iterdir()))):
         # a second run into the same folder would mix its files with the first's (and its

@@ -22,14 +22,16 @@ S_WTRACK, S_WWEAR, S_TPP, S_EPISODE, S_NSUB = range(17, 22)
 # derived constants (the tick multiplies by them instead of dividing per tick)
 S_HERTZ, S_TS, S_DTSUB, S_INV_L0, S_INV_TMAX, S_INV_VREF, S_INV_SR, S_INV_ST = range(22, 30)
 S_INV_NMAX, S_INV_TREF, S_INV_EPISODE, S_INV_WREF = range(30, 34)
-N_SV = 34
+S_WFINAL, S_INV_TOL = range(34, 36)  # terminal term: weight and 1 / tolerance
+N_SV = 36
 # followed by the observation clock: sin and cos of 2 pi j / ticks_per_period at
 # sv[N_SV + 2 j] and sv[N_SV + 2 j + 1], j = 0 .. ticks_per_period - 1 (a table: the clock
 # repeats every period, and two transcendental calls per tick were 3% of the default step)
 
 # per-env extras written besides the observation: reward terms and info values
-X_REWARD, X_TRACK, X_WEAR, X_SAT, X_U, X_V, X_N, X_T, X_SLIP, X_STICK, X_XS, X_VS = range(12)
-N_X = 12
+X_REWARD, X_TRACK, X_WEAR, X_FINAL, X_SAT, X_U, X_V, X_N, X_T, X_SLIP, X_STICK, X_XS, X_VS = (
+    range(13))
+N_X = 13
 N_OBS = 13
 OBS_BOUND = 10.0
 
@@ -98,10 +100,14 @@ def _env_tick(e, act, sv, target, steps, W, st, p, out, obs, extra, mu, mass, lo
     ob[12] = a2
     track = -sv[S_WTRACK] * abs(err) * sv[S_INV_TMAX]
     wear = -sv[S_WWEAR] * slip * sv[S_INV_WREF]
+    final = 0.0
+    if k == int(sv[S_EPISODE]):  # the episode's last tick: the final error, in tolerances
+        final = -sv[S_WFINAL] * abs(err) * sv[S_INV_TOL]
     x = extra[e]
-    x[X_REWARD] = track + wear
+    x[X_REWARD] = track + wear + final
     x[X_TRACK] = track
     x[X_WEAR] = wear
+    x[X_FINAL] = final
     x[X_SAT] = f
     x[X_U] = u
     x[X_V] = v
@@ -215,8 +221,9 @@ def scene_vector(scene, a_max: float, drive) -> np.ndarray:
         sc.w_track, sc.w_wear, tpp, sc.episode_steps, sc.n_sub)
     sv[[S_HERTZ, S_TS, S_DTSUB]] = (3.0 / (4.0 * sc.E_star * math.sqrt(sc.R)),
                                     drive.t0 / drive.L0, sc.dt / sc.n_sub / drive.t0)
-    sv[S_INV_L0:N_SV] = 1.0 / sv[[S_L0, S_TMAX, S_VREF, S_STROKE_R, S_STROKE_T, S_N_MAX, S_TREF,
-                                   S_EPISODE, S_WREF]]
+    sv[S_INV_L0:S_WFINAL] = 1.0 / sv[[S_L0, S_TMAX, S_VREF, S_STROKE_R, S_STROKE_T, S_N_MAX,
+                                      S_TREF, S_EPISODE, S_WREF]]
+    sv[[S_WFINAL, S_INV_TOL]] = sc.w_final, 1.0 / sc.tolerance
     return sv
 
 

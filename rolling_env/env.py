@@ -79,8 +79,11 @@ class RollingDriveEnv(gym.Env):
     ``reward_wear = -w_wear * slip_work / wear_ref``, where ``slip_work`` is the friction
     work of the tick [J] (Archard: wear volume ~ friction work) and
     ``wear_ref = mu N_max creep_max omega_R_max dt`` (the slip work of a tick of full sliding at
-    the largest rates; 1 J with mu = inf, where the term is always 0).  ``info`` holds both
-    terms; they add up exactly to the reward.
+    the largest rates; 1 J with mu = inf, where the term is always 0).  With the scene key
+    ``w_final`` > 0 (default 0; ``gym.make(..., w_final=20.0)``) the episode's last tick
+    (step ``episode_steps``) adds ``reward_final = -w_final |target - x*| / tolerance``: the
+    final error as the comparison scores it.  ``info`` holds the three terms; they add up to
+    the reward.
 
     ## Starting State
     Runner at rest at x* = 0, sphere centred (both travels 0), springs released, no contact
@@ -397,7 +400,8 @@ def check_actions(action, shape) -> np.ndarray:
 
 
 INFO_COLUMNS = {  # info key: column of the env kernel's extras (see _envkernel.X_*)
-    "reward_track": EK.X_TRACK, "reward_wear": EK.X_WEAR, "saturation": EK.X_SAT,
+    "reward_track": EK.X_TRACK, "reward_wear": EK.X_WEAR, "reward_final": EK.X_FINAL,
+    "saturation": EK.X_SAT,
     "omega_R": EK.X_U, "v": EK.X_V, "N": EK.X_N, "T": EK.X_T, "slip_work": EK.X_SLIP,
     "stick_fraction": EK.X_STICK, "xstar": EK.X_XS, "vstar": EK.X_VS,
 }

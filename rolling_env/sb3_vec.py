@@ -57,8 +57,9 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
     def step_wait(self):
         obs, rew, trunc = self.core.step(self._actions)
         x = self.core.extra
-        infos = [{"reward_track": tr, "reward_wear": we} for tr, we in
-                 zip(x[:, EK.X_TRACK].tolist(), x[:, EK.X_WEAR].tolist())]
+        infos = [{"reward_track": tr, "reward_wear": we, "reward_final": fi} for tr, we, fi in
+                 zip(x[:, EK.X_TRACK].tolist(), x[:, EK.X_WEAR].tolist(),
+                     x[:, EK.X_FINAL].tolist())]
         if np.count_nonzero(trunc):  # a quarter of the time of trunc.any() for 256 envs
             ended = np.flatnonzero(trunc)
             for i in ended:

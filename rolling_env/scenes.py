@@ -62,6 +62,7 @@ class Scene:
     w_wear: float            # weight of the wear term (per tick, on slip work / wear_ref)
     accuracy: float = DEFAULT_ACCURACY  # relative error "auto" sub-steps aim at [-]
     grid_levels: int = DEFAULT_GRID_LEVELS  # times the cells may halve for a smaller contact
+    w_final: float = 0.0     # weight of the terminal term (last tick, on |error|/tolerance)
 
     @property
     def dt(self) -> float:
@@ -118,8 +119,9 @@ _SPEC = {  # key: (type, lo, hi, lo_open, allow_inf); physical ranges, wide but 
     "w_wear": (float, 0.0, 1e12, False, False),
     "accuracy": (float, 1e-6, 0.5, False, False),
     "grid_levels": (int, 0, 12, False, False),
+    "w_final": (float, 0.0, 1e6, False, False),
 }
-_OPTIONAL = {"accuracy", "grid_levels"}  # keys a scene file may leave out (their defaults above)
+_OPTIONAL = {"accuracy", "grid_levels", "w_final"}  # keys a scene file may leave out (their defaults above)
 E_OVER_G_RANGE = (0.01, 100.0)  # E*/G*: about 1-2 for real materials (isotropic, 0 <= nu <= 0.5)
 
 _FIELDS = [f.name for f in dataclasses.fields(Scene)]

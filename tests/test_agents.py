@@ -744,14 +744,14 @@ def test_a_run_trained_on_other_numerics_is_evaluated_and_marked(trained_run, tm
                           "--episodes", "1", "--out", str(out)]) == 0
     note = f"sub_steps 4 (now auto: {sc.n_sub}), resolution 12 (now 64)"
     err = capsys.readouterr().err
-    assert err.count("trained on other numerics") == 2 and note in err, err
+    assert err.count("trained on other numerics or reward weights") == 2 and note in err, err
     with open(out / "comparison.csv") as f:
         rows = {r["controller"]: r for r in csv.DictReader(f)}
     assert rows["ppo_seed0"]["trained_numerics"] == note, rows["ppo_seed0"]
     assert rows["eq32-feedback"]["trained_numerics"] == "", "a baseline is never marked"
     md = (out / "comparison.md").read_text()
     assert "| myscene | ppo_seed0 [1] | model.zip |" in md, md
-    assert f"* [1] trained on other numerics: {note}\n" in md, md
+    assert f"* [1] trained on other numerics or reward weights: {note}\n" in md, md
     assert "| myscene | ppo_seed1 [1] | eq32-open-loop |" in md, "goal table not marked"
     assert "| myscene | ppo [1] | 0, 1 |" in md, "seed summary not marked"
     assert "| myscene | eq32-feedback | - |" in md
@@ -760,6 +760,29 @@ def test_a_run_trained_on_other_numerics_is_evaluated_and_marked(trained_run, tm
     assert cli_main(["rollout", "--scene", str(scene), "--controller", str(model),
                      "--out", str(tmp_path / "roll"), "--json"]) == 0
     assert "trained on other numerics" in capsys.readouterr().err
+
+
+def test_a_run_trained_with_other_reward_weights_is_evaluated_and_marked(trained_run, tmp_path,
+                                                                        capsys):
+    """The reward's weights shape learning, not what the comparison scores: a run trained
+    with ``w_final`` in its env_kwargs (and so in its recorded fields) is evaluated on the
+    plain scene and its note names the weight."""
+    import shutil
+
+    from agents.evaluate import main as evaluate_main
+    scene, runs = trained_run
+    run = tmp_path / "runs" / "myscene" / "ppo_seed0"
+    shutil.copytree(runs / "myscene" / "ppo_seed0", run)
+    cfg = _as_if_trained_on(run, w_final=10.0)
+    (run / "config.yml").write_text(yaml.safe_dump(dict(
+        cfg, env_kwargs=dict(cfg["env_kwargs"], w_final=10.0))))
+    out = tmp_path / "out"
+    assert evaluate_main(["--scenes", str(scene), "--runs", str(tmp_path / "runs"),
+                          "--episodes", "1", "--out", str(out)]) == 0
+    md = (out / "comparison.md").read_text()
+    assert "* [1] trained on other numerics or reward weights: w_final 10 (now 0)\n" in md, md
+    assert "| myscene | ppo_seed0 [1] | model.zip |" in md, md
+    capsys.readouterr()
 
 
 @pytest.mark.parametrize("changes,names", [

@@ -94,6 +94,48 @@ def test_reward_from_its_definition(scene):
         assert wear_sum == 0.0, f"{scene}: infinite friction, yet a wear term {wear_sum}"
 
 
+@pytest.mark.parametrize("scene", ["default", "light_stiff"])
+def test_terminal_reward_from_its_definition(scene):
+    """With ``w_final`` the episode's last tick adds -w_final |target - x*| / tolerance (the
+    final error as the comparison scores it), and no other tick does; ``info["reward_final"]``
+    holds the term and the three terms add up to the reward.  Checked over two 40-tick
+    episodes of seeded random actions, on the single env and on the batched env, which must
+    agree to the bit.  Relative tolerance 1e-12 (the kernel multiplies by 1/tolerance)."""
+    w_final, steps = 7.5, 40
+    env = gym.make("RollingDrive-v0", scene=scene, w_final=w_final, episode_steps=steps)
+    venv = gym.make_vec("RollingDrive-v0", num_envs=1, scene=scene, w_final=w_final,
+                        episode_steps=steps)
+    sc = env.unwrapped.scene
+    rng = np.random.default_rng(3)
+    finals = 0
+    for k in range(2 * steps):
+        if k % steps == 0:  # both reset alike (the vector env would autoreset a step later)
+            env.reset(seed=3 + k)
+            venv.reset(seed=3 + k)
+        a = rng.uniform(-1, 1, 3).astype(np.float32)
+        _, reward, _, truncated, info = env.step(a)
+        _, vrew, _, vtrunc, vinfo = venv.step(a[None])
+        assert vrew[0] == reward and vinfo["reward_final"][0] == info["reward_final"], (
+            f"{scene} tick {k}: batched env {vrew[0]!r} vs single {reward!r}")
+        last = (k + 1) % steps == 0
+        want = -w_final * abs(info["target"] - info["xstar"]) / sc.tolerance if last else 0.0
+        assert abs(info["reward_final"] - want) <= 1e-12 * abs(want), (
+            f"{scene} tick {k}: reward_final {info['reward_final']!r}, want {want!r}")
+        total = info["reward_track"] + info["reward_wear"] + info["reward_final"]
+        assert abs(reward - total) <= 1e-12 * abs(reward), (
+            f"{scene} tick {k}: the info's terms {total!r} do not add up to {reward!r}")
+        assert truncated == last
+        if last:
+            finals += 1
+            assert want < 0.0, "random actions should not end exactly on the target"
+    assert finals == 2
+
+
+def test_terminal_reward_weight_is_checked():
+    with pytest.raises(ValueError, match=r"w_final.*\[0"):
+        gym.make("RollingDrive-v0", w_final=-1.0)
+
+
 # ----------------------------------------------------------------------------- 2. x* and v*
 def _xstar_vs_trapezoid(mu, eps, r, ticks_per_half, n_sub, periods=2):
     """A free runner (omega_n/Omega = r) under the square wave (delta 0.7, w 2.5) from rest:
