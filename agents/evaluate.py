@@ -397,6 +397,7 @@ def evaluate_scene(scene: str, runs: Path, episodes: int, env=None,
         row["tolerance"] = tol
         row.update(_budget(getattr(ctrl, "run", None)))
         row["config_key"] = _config_key(getattr(ctrl, "run", None))
+        row["goal_log"] = read_goal_log(getattr(ctrl, "run", None))
         row["trained_numerics"] = getattr(ctrl, "numerics", "")  # "" where trained on these
         rows.append(row)
     env.close()
@@ -476,8 +477,47 @@ def goal_verdicts(rows: list[dict]) -> list[dict]:
             out.append({"scene": scene, "agent": r["controller"], "baseline": b["controller"],
                         "error_ratio": e_ratio,
                         "slip_ratio": (w_a / w_b) if w_b > 0 else (np.nan if w_a == 0 else np.inf),
-                        "met": bool(e_ratio <= 0.5 and no_more_wear)})
+                        "met": bool(e_ratio <= 0.5 and no_more_wear),
+                        "time_to_goal": time_to_goal(r.get("goal_log"), b)})
     return out
+
+
+def read_goal_log(run: Path | None):
+    """A run's ``eval_goal.json`` (agents.train's periodic evaluations: env steps, wall time,
+    each episode's final |error| and slip work); None without one."""
+    from .train import GOAL_LOG
+    path = run / GOAL_LOG if run is not None else None
+    if path is None or not path.exists():
+        return None
+    try:
+        log = json.loads(path.read_text(encoding="utf-8"))
+        for e in log:
+            int(e["env_steps"]), float(e["wall_seconds"])
+            np.asarray(e["final_abs_error"], float), np.asarray(e["slip_work"], float)
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise ValueError(f"{str(path)!r} cannot be read: it is damaged or not what "
+                         f"agents.train writes ({one_line(e)})") from None
+    return log
+
+
+def time_to_goal(log, base: dict):
+    """(env steps, wall seconds) of the first periodic evaluation in which the agent met the
+    goal against the baseline row ``base``: the mean final |error| of its episodes at most
+    half the baseline's mean over the held-out targets, at no more mean slip work.  None
+    where the run has no log, "never" where no evaluation met it."""
+    if log is None:
+        return None
+    for e in log:
+        err, slip = np.mean(e["final_abs_error"]), np.mean(e["slip_work"])
+        if err <= 0.5 * base["final_abs_error_mean"] and slip <= base["slip_work_mean"]:
+            return int(e["env_steps"]), float(e["wall_seconds"])
+    return "never"
+
+
+def _fmt_time_to_goal(t) -> str:
+    if t is None:
+        return "not logged"
+    return t if isinstance(t, str) else f"{t[0]:,}, {t[1]:.0f}"
 
 
 _SEED_SUFFIX = re.compile(r"^(?P<name>.+)_seed(?P<seed>\d+)$")
@@ -608,14 +648,20 @@ def write_tables(rows: list[dict], out: Path, episodes: int | None = None,
                   "work", "",
                   "Best baseline = the Eq. 32 controller with the lower mean final error in the "
                   "scene.", "",
+                  "*First met in training*: the env steps and wall seconds at which a "
+                  "periodic evaluation of the run (agents.train's, --eval-episodes on targets of "
+                  "its own) first met the goal against this baseline's numbers; 'not logged' "
+                  "for runs from before the log.", "",
                   "| scene | agent | best baseline | final error agent / baseline | "
-                  "slip work agent / baseline | met |", "|---|---|---|---|---|---|"]
+                  "slip work agent / baseline | met | first met in training (env steps, "
+                  "wall s) |", "|---|---|---|---|---|---|---|"]
         for v in verdicts:
             sr = v["slip_ratio"]
             agent = _marked(v["agent"], note_of.get((v["scene"], v["agent"]), ""), marks)
             lines.append(f"| {v['scene']} | {agent} | {v['baseline']} | "
                          f"{v['error_ratio']:.2f} | {_fmt_ratio(sr)}"
-                         f" | {'yes' if v['met'] else 'no'} |")
+                         f" | {'yes' if v['met'] else 'no'} | "
+                         f"{_fmt_time_to_goal(v['time_to_goal'])} |")
     summary = seed_summary(rows)
     if summary:
         lines += ["", "## Over seeds", "",

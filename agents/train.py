@@ -132,11 +132,32 @@ def _eval_callback(eval_env, run: Path, eval_freq: int, n_episodes: int, on_eval
     (``run/.eval_scratch``, removed at the end) and after each evaluation the log is copied
     atomically to ``run/evaluations.npz``; a new best model is saved atomically as
     ``best_model.zip`` with the VecNormalize statistics of that moment beside it
-    (``best_model_vecnormalize.pkl``: the statistics it was selected with).  ``on_eval``,
+    (``best_model_vecnormalize.pkl``: the statistics it was selected with).  ``GOAL_LOG``
+    keeps, per evaluation, the env steps, the wall time since the start of training and
+    each episode's final |error| and slip work (``agents.evaluate``'s time to goal).  ``on_eval``,
     if given, is called after each evaluation with (env steps, mean eval reward)."""
     from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
     scratch = run / ".eval_scratch"
+    t0 = time.perf_counter()
+    log: list = []
+
+    class GoalEval(EvalCallback):
+        """EvalCallback that also keeps, per evaluation episode, the final |error| [m] and
+        the slip work [J] (from the single env's info), for the time to goal."""
+
+        def _on_step(self):
+            if self.eval_freq > 0 and self.n_calls % self.eval_freq == 0:  # evaluates now
+                self._goal_eps, self._slip = [], {}
+            return super()._on_step()
+
+        def _log_success_callback(self, locals_, globals_):
+            super()._log_success_callback(locals_, globals_)
+            info, i = locals_["info"], locals_["i"]
+            self._slip[i] = self._slip.get(i, 0.0) + float(info.get("slip_work", 0.0))
+            if locals_["done"] and "xstar" in info:
+                self._goal_eps.append((abs(float(info["target"]) - float(info["xstar"])),
+                                       self._slip.pop(i)))
 
     class OnNewBest(BaseCallback):
         def _on_step(self):
@@ -149,11 +170,18 @@ def _eval_callback(eval_env, run: Path, eval_freq: int, n_episodes: int, on_eval
             if src.exists():
                 atomic_write(run / "evaluations.npz",
                              lambda p: Path(p).write_bytes(src.read_bytes()))
+            eps = getattr(self.parent, "_goal_eps", [])
+            if eps:
+                log.append({"env_steps": int(self.num_timesteps),
+                            "wall_seconds": round(time.perf_counter() - t0, 2),
+                            "final_abs_error": [e for e, _ in eps],
+                            "slip_work": [w for _, w in eps]})
+                atomic_write(run / GOAL_LOG, lambda p: Path(p).write_text(json.dumps(log)))
             if on_eval is not None:
                 on_eval(int(self.num_timesteps), float(self.parent.last_mean_reward))
             return True
 
-    return EvalCallback(eval_env, best_model_save_path=None, log_path=str(scratch),
+    return GoalEval(eval_env, best_model_save_path=None, log_path=str(scratch),
                         eval_freq=eval_freq, n_eval_episodes=n_episodes, deterministic=True,
                         verbose=0, callback_on_new_best=OnNewBest(), callback_after_eval=AfterEval())
 
@@ -163,6 +191,7 @@ class UsageError(ValueError):
 
 
 VEC_ENVS = ("batched", "dummy")  # the kinds of common.make_vec_env
+GOAL_LOG = "eval_goal.json"  # final errors and slip work of the periodic evaluations
 
 
 def num_threads_arg(text):
@@ -259,7 +288,9 @@ def _setup(args, command=None):
     trained = env.get_attr("scene", [0])[0]  # with the overrides of env_kwargs applied
     vec_env["num_threads"] = "auto" if args.num_threads is None else args.num_threads
     check_policy(args.algo, checked["kwargs"], env)  # torch's errors named policy_kwargs
-    eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs)
+    # single envs: their infos carry x*, the target and the slip work (for GOAL_LOG); the
+    # transitions are those of the batched env
+    eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs, kind="dummy")
     residual = checked["residual"]
     if residual is not None:  # the policy's action is added to a baseline's
         env = ResidualVecEnv(env, *residual)
@@ -353,10 +384,11 @@ def _replace_run(run: Path, work: Path) -> None:
 
 RUN_MARKER = "rolling-drive-run.txt"  # written when the script creates a run folder
 RUN_FILES = re.compile(  # what the script (and SB3's TensorBoard logger) writes in a run folder
-    r"^(config\.yml|command\.txt|meta\.json|evaluations\.npz|tb|\.eval_scratch|"
+    r"^(config\.yml|command\.txt|meta\.json|evaluations\.npz|eval_goal\.json|tb|"
+    r"\.eval_scratch|"
     + re.escape(RUN_MARKER) + r"|(model|best_model|checkpoint)(\.zip|_vecnormalize\.pkl)|"
-    r"\.(config|command|meta|evaluations|model|best_model|checkpoint)(_vecnormalize)?\.[^/]+"
-    r"\.(yml|txt|json|npz|zip|pkl))$")  # the last line: atomic writes' temporary files
+    r"\.(config|command|meta|evaluations|eval_goal|model|best_model|checkpoint)(_vecnormalize)?"
+    r"\.[^/]+\.(yml|txt|json|npz|zip|pkl))$")  # the last line: atomic writes' temporary files
 TB_FILES = re.compile(r"^(ppo|sac|td3)_\d+(/events\.out\.tfevents\.[^/]+)?$")
 SCRATCH_FILES = re.compile(r"^evaluations\.npz$")
 

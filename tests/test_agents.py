@@ -196,6 +196,16 @@ def test_short_training_run_saves_loadable_model(tmp_path):
     assert agent_file(run) == run / "model.zip", "the final model is evaluated by default"
     assert agent_file(run, "best") == run / "best_model.zip"  # its statistics saved with it
     assert not [p for p in run.iterdir() if p.name.startswith(".")], "scratch files left behind"
+    # the periodic evaluations' final errors and slip work, one entry per evaluation
+    log = json.loads((run / "eval_goal.json").read_text())
+    with np.load(run / "evaluations.npz") as ev:
+        assert [e["env_steps"] for e in log] == ev["timesteps"].tolist()
+    sc = env.unwrapped.scene
+    for e in log:
+        assert len(e["final_abs_error"]) == len(e["slip_work"]) == 1  # --eval-episodes 1
+        assert 0 <= e["final_abs_error"][0] <= 2 * sc.target_max, e
+        assert e["slip_work"][0] > 0, "finite friction: the evaluation episode slides"
+        assert e["wall_seconds"] > 0
 
 
 def test_train_refuses_a_used_run_folder(tmp_path, capsys):
@@ -248,6 +258,22 @@ def test_train_refuses_a_used_run_folder(tmp_path, capsys):
     finally:
         os.chdir(REPO)
     assert (good / "model.zip").exists()
+
+
+def test_time_to_goal_is_the_first_evaluation_that_meets_the_goal():
+    from agents.evaluate import time_to_goal
+    base = {"final_abs_error_mean": 1.0e-8, "slip_work_mean": 2.0e-8}
+    log = [{"env_steps": 10, "wall_seconds": 1.0, "final_abs_error": [4e-9, 8e-9],
+            "slip_work": [1e-8, 1e-8]},                   # error 0.6x: not yet
+           {"env_steps": 20, "wall_seconds": 2.0, "final_abs_error": [4e-9, 5e-9],
+            "slip_work": [3e-8, 2e-8]},                   # error 0.45x, but 1.25x the wear
+           {"env_steps": 30, "wall_seconds": 3.5, "final_abs_error": [4e-9, 6e-9],
+            "slip_work": [2e-8, 2e-8]},                   # 0.5x at 1x: met
+           {"env_steps": 40, "wall_seconds": 4.0, "final_abs_error": [1e-9],
+            "slip_work": [1e-8]}]
+    assert time_to_goal(log, base) == (30, 3.5)
+    assert time_to_goal(log[:2], base) == "never"
+    assert time_to_goal(None, base) is None
 
 
 def test_goal_verdicts():

@@ -51,7 +51,7 @@ def test_baselines_are_one_run_with_a_zero_width_interval(table):
     _, st = table
     fb = st["eq32-feedback"]
     assert fb["runs"] == 1 and fb["iqm_error"] == fb["iqm_error_lo"] == fb["iqm_error_hi"] == 1.0
-    assert st["good"]["baseline"] == "eq32-feedback", "the better baseline has the lower IQM"
+    assert st["good"]["baseline"] == "eq32-feedback", "the better baseline has the lower mean"
 
 
 def test_probability_of_improvement(table):
