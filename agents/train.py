@@ -127,7 +127,8 @@ class _AtomicCheckpoint:
         return Cb()
 
 
-def _eval_callback(eval_env, run: Path, eval_freq: int, n_episodes: int, on_eval=None):
+def _eval_callback(eval_env, run: Path, eval_freq: int, n_episodes: int, on_eval=None,
+                   tol: float | None = None):
     """SB3's EvalCallback with every file written atomically: it logs to a scratch folder
     (``run/.eval_scratch``, removed at the end) and after each evaluation the log is copied
     atomically to ``run/evaluations.npz``; a new best model is saved atomically as
@@ -177,6 +178,12 @@ def _eval_callback(eval_env, run: Path, eval_freq: int, n_episodes: int, on_eval
                             "final_abs_error": [e for e, _ in eps],
                             "slip_work": [w for _, w in eps]})
                 atomic_write(run / GOAL_LOG, lambda p: Path(p).write_text(json.dumps(log)))
+                if tol:  # one line per evaluation: what a user watches a run by
+                    err = sum(e for e, _ in eps) / len(eps) / tol
+                    slip = sum(w for _, w in eps) / len(eps)
+                    print(f"eval at {self.num_timesteps:,} env steps: mean reward "
+                          f"{self.parent.last_mean_reward:.2f}, final |error| {err:.2f} "
+                          f"tolerance, slip work {slip:.3g} J", flush=True)
             if on_eval is not None:
                 on_eval(int(self.num_timesteps), float(self.parent.last_mean_reward))
             return True
@@ -450,7 +457,7 @@ def train(args, *, command: str | None = None, on_eval=None) -> Path:
     scene = args.scene
     callbacks = CallbackList([
         _eval_callback(eval_env, work, max(args.eval_freq // n_envs, 1), args.eval_episodes,
-                       on_eval),
+                       on_eval, trained.tolerance),
         _AtomicCheckpoint.make(work, max(args.checkpoint_freq, 1)),
     ])
 

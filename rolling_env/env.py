@@ -90,7 +90,9 @@ class RollingDriveEnv(gym.Env):
     until the first action.  The target is drawn uniformly from ``[target_min, target_max]``
     (with a random sign if ``target_both_signs``) with the env's seeded generator, or given by
     ``reset(options={"target": x})`` in metres, |x| <= 10 target_max (where the error
-    observation saturates); "target" is the only option.
+    observation saturates), of either sign whatever ``target_both_signs`` says (that key
+    governs the random draws only: in ``loaded`` a negative target runs with the load);
+    "target" is the only option.
 
     ## Episode End
     No terminal state (``terminated`` is always False).  The env truncates after the scene's
@@ -297,11 +299,11 @@ def target_option(scene: Scene, options, name: str = "options['target']") -> flo
     except OverflowError:  # an integer beyond the float range (10**400)
         raise ValueError(f"{name} must be a finite displacement in [-{lim!r}, {lim!r}] m, got "
                          f"an integer too large for a float") from None
-    if not (math.isfinite(t) and abs(t) <= lim):
-        # the bound at full precision: 10 x 5e-7 rounds to 4.9999999999999996e-06, and a
-        # shortened bound would read as if it admitted 5e-06
-        raise ValueError(f"{name} must be a finite displacement in [-{lim!r}, "
-                         f"{lim!r}] m (OBS_BOUND x the scene's target_max, where the error "
+    if not (math.isfinite(t) and abs(t) <= lim * (1.0 + 1e-12)):
+        # the bound as the user reads it: 10 x 5e-7 rounds to 4.9999999999999996e-06, and
+        # 5e-06 is admitted (its error observation sits at the clip, as the bound's does)
+        raise ValueError(f"{name} must be a finite displacement in [-{lim:.6g}, "
+                         f"{lim:.6g}] m (OBS_BOUND x the scene's target_max, where the error "
                          f"observation saturates), got {t!r}")
     return t
 

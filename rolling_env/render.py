@@ -9,10 +9,8 @@ import numpy as np
 
 def _figure(state: dict):
     if "fig" not in state:
-        import matplotlib
-        from matplotlib.figure import Figure
         from matplotlib.backends.backend_agg import FigureCanvasAgg
-        matplotlib.rcParams.update({"font.size": 8})
+        from matplotlib.figure import Figure
         fig = Figure(figsize=(6.4, 4.8), dpi=100)
         FigureCanvasAgg(fig)
         state["fig"] = fig
@@ -20,8 +18,16 @@ def _figure(state: dict):
 
 
 def render_frame(env, state: dict) -> np.ndarray:
-    """uint8 (480, 640, 3) frame: top, normal and tangential deflection along the row with
-    stick (blue) and slip (red) cells; bottom, runner displacement against the target."""
+    """uint8 (480, 640, 3) frame: top, normal deflection (line, left axis) and tangential
+    deflection (bars, right axis) along the row with stick (blue) and slip (red) cells; bottom,
+    runner displacement against the target.  The small font is set for the frame only: the
+    caller's matplotlib settings stay as they were."""
+    import matplotlib
+    with matplotlib.rc_context({"font.size": 8}):
+        return _draw(env, state)
+
+
+def _draw(env, state: dict) -> np.ndarray:
     fig = _figure(state)
     fig.clear()
     ax1, ax2 = fig.subplots(2, 1)
@@ -40,8 +46,11 @@ def render_frame(env, state: dict) -> np.ndarray:
     ax1.patch.set_visible(False)
     ax1.set_xlim(-env.scene.stroke_roll / a - 1.2, env.scene.stroke_roll / a + 1.2)
     ax1.set_xlabel("x / a_max (frame of the sphere)")
-    ax1.set_ylabel("uN [nm]")
-    ax1b.set_ylabel("uT [nm]")
+    ax1.set_ylabel("uN [nm] (line)")
+    ax1b.set_ylabel("uT [nm] (bars)")
+    lines, labels = ax1.get_legend_handles_labels()
+    bars, bar_labels = ax1b.get_legend_handles_labels()
+    ax1.legend(lines + bars, labels + bar_labels, loc="upper left", fontsize=7)
     o = env._info()
     ax1.set_title(f"{env.scene.name}: N = {o['N']:.3g} N, T = {o['T']:.3g} N, "
                   f"stick {100 * o['stick_fraction']:.0f}%")

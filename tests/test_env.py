@@ -205,6 +205,14 @@ def test_target_option_and_sampled_range():
         assert sc.target_min <= abs(info["target"]) <= sc.target_max
     with pytest.raises(ValueError, match="target"):
         env.reset(options={"target": float("nan")})
+    # the bound as written in the message is admitted (10 x 5e-7 rounds below 5e-6)
+    _, info = env.reset(options={"target": -5e-6})
+    assert info["target"] == -5e-6
+    # a given target may have either sign where random draws have one only
+    loaded = gym.make("RollingDrive-v0", scene="loaded")
+    assert not loaded.unwrapped.scene.target_both_signs
+    _, info = loaded.reset(seed=0, options={"target": -3e-7})
+    assert info["target"] == -3e-7
 
 
 @pytest.mark.parametrize("bad", [np.array([np.nan, 0, 0]), np.array([0, np.inf, 0]),
@@ -308,9 +316,13 @@ def test_render_rgb_array():
     env.reset(seed=0)
     for _ in range(5):
         env.step(np.array([0.5, 0.5, 0.5], np.float32))
+    import matplotlib
+    before = dict(matplotlib.rcParams)
     frame = env.render()
     assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
     assert frame.std() > 5, "frame should not be blank"
+    changed = {k for k, v in matplotlib.rcParams.items() if before.get(k) != v}
+    assert not changed, f"rendering changed the caller's matplotlib settings: {changed}"
 
 
 # ----------------------------------------------------------------------------- scenes
@@ -465,9 +477,8 @@ def test_vanishing_runner_mass_tends_to_massless():
 
 @pytest.mark.parametrize("options,match", [
     ({"target": 1e-3}, r"options\['target'\] must be a finite displacement in "
-                       r"\[-4.9999999999999996e-06, 4.9999999999999996e-06\]"),
-    # refused because 10 x 5e-7 rounds below 5e-6: the message shows the bound that refuses it
-    ({"target": 5e-6}, r"in \[-4.9999999999999996e-06, 4.9999999999999996e-06\] m .*got 5e-06"),
+                       r"\[-5e-06, 5e-06\]"),
+    ({"target": 5.001e-6}, r"in \[-5e-06, 5e-06\] m .*got 5.001e-06"),
     ({"target": True}, r"options\['target'\] must be a number"),
     ({"target": 10**400}, r"options\['target'\] .* got an integer too large for a float"),
     ({"target": float("nan")}, "finite displacement"),
