@@ -578,6 +578,7 @@ def scene_fields(scene) -> dict:
     sc = scene if isinstance(scene, Scene) else load_scene(scene)
     fields = {k: v for k, v in dataclasses.asdict(sc).items()
               if k not in ("name", "description")}
+    fields["randomize"] = [list(t) for t in sc.randomize]  # as YAML and JSON read it back
     fields["n_sub"] = int(sc.n_sub)
     return fields
 
@@ -606,7 +607,8 @@ def completed_fields(fields: dict) -> dict:
     for f in dataclasses.fields(Scene):
         if f.name not in out and f.name not in ("name", "description") \
                 and f.default is not dataclasses.MISSING:
-            out[f.name] = BEFORE_KEY.get(f.name, f.default)
+            v = BEFORE_KEY.get(f.name, f.default)
+            out[f.name] = list(v) if isinstance(v, tuple) else v
     sub = out.get("sub_steps")
     if "n_sub" not in out and isinstance(sub, int) and not isinstance(sub, bool):
         out["n_sub"] = sub

@@ -254,6 +254,11 @@ def choose_vec_env(flag: str, scene, n_envs: int, env_kwargs, num_threads=None,
     num_threads)`` (env steps/s per kind).  Returns (kind, record for meta.json)."""
     if flag != "auto":
         return flag, {"kind": flag, "chosen_by": "--vec-env"}
+    from rolling_env.scenes import load_scene
+    kw = {k: v for k, v in dict(env_kwargs or {}).items() if k != "scene"}
+    if load_scene(scene, **kw).randomize:  # the batched envs step one physics only
+        return "dummy", {"kind": "dummy", "chosen_by": "the scene draws its physics per "
+                         "episode (randomize): single envs"}
     rates = measure(scene, n_envs, env_kwargs, num_threads)
     kind = max(VEC_ENVS, key=lambda k: rates[k])
     return kind, {"kind": kind, "chosen_by": "measured at start",

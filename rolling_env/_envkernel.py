@@ -199,14 +199,17 @@ def reset_obs(e, sv, target, obs):
     ob[8] = 1.0  # cos(0)
 
 
-def scene_vector(scene, a_max: float, drive) -> np.ndarray:
-    """Scene constants for the kernel (see ``S_*``)."""
+def scene_vector(scene, a_max: float, drive, scales=None) -> np.ndarray:
+    """Scene constants for the kernel (see ``S_*``); the observation and reward scales
+    (``T_ref``, ``wear_ref``) from ``scales`` where given (a randomised scene's nominal
+    values: the same in every episode), else from ``scene``."""
     sc = scene
+    ns = scales if scales is not None else scene
     v_ref = 0.3 * sc.creep_max * sc.omega_R_max
     T_stuck = 2 * a_max * sc.G_star * sc.creep_max * sc.stroke_roll
-    T_ref = min(sc.mu * sc.N_max, T_stuck)
-    wear_ref = (sc.mu * sc.N_max * sc.creep_max * sc.omega_R_max * sc.dt
-                if math.isfinite(sc.mu) else 1.0)
+    T_ref = min(ns.mu * sc.N_max, T_stuck)
+    wear_ref = (ns.mu * sc.N_max * sc.creep_max * sc.omega_R_max * sc.dt
+                if math.isfinite(ns.mu) else 1.0)
     tpp = sc.ticks_per_period
     sv = np.zeros(N_SV + 2 * tpp)
     phase = 2.0 * np.pi * np.arange(tpp) / tpp

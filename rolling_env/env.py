@@ -12,7 +12,7 @@ from gymnasium import spaces
 from . import _envkernel as EK
 from . import _kernel as K
 from .model import Drive, DriveParams, check_flags
-from .scenes import EPISODE_STEPS_MAX, Scene, load_scene
+from .scenes import EPISODE_STEPS_MAX, Scene, draw_physics, episode_scene, load_scene
 
 OBS_NAMES = (
     "error", "vstar", "roll_pos", "translate_pos", "normal_force", "tangential_force",
@@ -141,13 +141,11 @@ class RollingDriveEnv(gym.Env):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None,"
                              f" got {render_mode!r}")
         self.render_mode = render_mode
-        self.drive, self.a_max = build_drive(self.scene)
         self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
         self.observation_space = spaces.Box(-OBS_BOUND, OBS_BOUND, (len(OBS_NAMES),), np.float32)
         self.dt = self.scene.dt
-        self._features = self.drive.kernel_features + (None,)  # no energy ledger
-        self._sv = EK.scene_vector(self.scene, self.a_max, self.drive)
-        self._bind_arrays()
+        self._draw = {}  # this episode's draw of a randomised scene's physics
+        self._build(self.scene)
         self._act = np.zeros((1, 3))
         self._target = np.zeros(1)
         self._steps = np.zeros(1, dtype=np.int64)
@@ -158,6 +156,15 @@ class RollingDriveEnv(gym.Env):
         self._trunc = np.zeros(1, dtype=np.bool_)
         self._history = []
         self._render_state = {}  # this env's figure and window (rolling_env.render)
+
+    def _build(self, sc: Scene) -> None:
+        """The drive and kernel constants for the physics of ``sc``; the observation and
+        reward scales stay those of ``self.scene`` (the nominal scene of a randomised one), so
+        that they mean the same in every episode."""
+        self.drive, self.a_max = build_drive(sc)
+        self._features = self.drive.kernel_features + (None,)  # no energy ledger
+        self._sv = EK.scene_vector(sc, self.a_max, self.drive, scales=self.scene)
+        self._bind_arrays()
 
     def _bind_arrays(self) -> None:
         """Batch-of-one views of the drive's arrays for the env kernel (made once, not per
@@ -188,6 +195,9 @@ class RollingDriveEnv(gym.Env):
         given = target_option(self.scene, options)  # checked before anything changes
         super().reset(seed=seed)
         self._target[0] = sample_target(self.scene, self.np_random, given)
+        if self.scene.randomize:  # this episode's physics, after the target's draw
+            self._draw = draw_physics(self.scene, self.np_random)
+            self._build(episode_scene(self.scene, self._draw))
         self.drive.reset()
         self._steps[0] = 0
         self._extra[:] = 0.0
@@ -229,7 +239,10 @@ class RollingDriveEnv(gym.Env):
         close(self._render_state)
 
     def _info(self) -> dict:
-        return info_dict(self._extra[0], self._target[0])
+        d = info_dict(self._extra[0], self._target[0])
+        if self._draw:
+            d["scene_draw"] = dict(self._draw)
+        return d
 
 
 def build_drive(scene: Scene) -> tuple[Drive, float]:

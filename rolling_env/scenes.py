@@ -63,6 +63,8 @@ class Scene:
     accuracy: float = DEFAULT_ACCURACY  # relative error "auto" sub-steps aim at [-]
     grid_levels: int = DEFAULT_GRID_LEVELS  # times the cells may halve for a smaller contact
     w_final: float = 0.0     # weight of the terminal term (last tick, on |error|/tolerance)
+    # physics drawn per episode: ((key, low, high), ...) of RANDOMIZABLE keys (single envs)
+    randomize: tuple = ()
 
     @property
     def dt(self) -> float:
@@ -121,7 +123,11 @@ _SPEC = {  # key: (type, lo, hi, lo_open, allow_inf); physical ranges, wide but 
     "grid_levels": (int, 0, 12, False, False),
     "w_final": (float, 0.0, 1e6, False, False),
 }
-_OPTIONAL = {"accuracy", "grid_levels", "w_final"}  # keys a scene file may leave out (their defaults above)
+_OPTIONAL = {"accuracy", "grid_levels", "w_final", "randomize"}
+#: keys a scene may draw per episode (``randomize``); mu and runner_mass log-uniformly (they
+#: scale), F_ext uniformly
+RANDOMIZABLE = ("mu", "runner_mass", "F_ext")
+LOG_UNIFORM = ("mu", "runner_mass")  # keys a scene file may leave out (their defaults above)
 E_OVER_G_RANGE = (0.01, 100.0)  # E*/G*: about 1-2 for real materials (isotropic, 0 <= nu <= 0.5)
 
 _FIELDS = [f.name for f in dataclasses.fields(Scene)]
@@ -137,6 +143,8 @@ def _coerce(key, value):
             raise ValueError("scene key 'name' must be a file name: 1 to 100 characters, no "
                              f"'/', '\\' or NUL, not starting with '.', got {value!r}")
         return value
+    if key == "randomize":
+        return _coerce_randomize(value)
     if key not in _SPEC:
         raise ValueError(f"unknown scene key '{key}'; allowed keys: {', '.join(_FIELDS)}")
     if key == "sub_steps":
@@ -179,6 +187,59 @@ def _coerce_number(key, value):
             raise ValueError(f"scene key '{key}' must be an integer in [{lo}, {hi}], got {value}")
     x = check_range(f"scene key '{key}'", value, lo, hi, lo_open=lo_open, allow_inf=allow_inf)
     return typ(x) if typ is int else x
+
+
+def _coerce_randomize(value) -> tuple:
+    """``randomize`` as a sorted tuple of (key, low, high): from a mapping ``{key: [low,
+    high]}`` (a scene file) or from such triples (a Scene's own value)."""
+    if value is None:
+        return ()
+    if isinstance(value, dict):
+        items = list(value.items())
+    elif isinstance(value, (list, tuple)) and all(
+            isinstance(t, (list, tuple)) and len(t) == 3 for t in value):
+        items = [(t[0], (t[1], t[2])) for t in value]
+    else:
+        raise ValueError("scene key 'randomize' must be a mapping of key: [low, high] with "
+                         f"keys among {', '.join(RANDOMIZABLE)}, got {value!r}")
+    out = []
+    for k, r in items:
+        if k not in RANDOMIZABLE:
+            raise ValueError(f"scene key 'randomize': {k!r} cannot be drawn per episode (one "
+                             f"of {', '.join(RANDOMIZABLE)})")
+        if not isinstance(r, (list, tuple)) or len(r) != 2:
+            raise ValueError(f"scene key 'randomize.{k}' must be [low, high], got {r!r}")
+        try:
+            lo, hi = (_coerce_number(k, x) for x in r)
+        except ValueError as e:
+            raise ValueError(f"scene key 'randomize.{k}': {e}") from None
+        if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
+            raise ValueError(f"scene key 'randomize.{k}' must be finite [low, high] with low "
+                             f"<= high, got [{lo:g}, {hi:g}]")
+        if k in LOG_UNIFORM and lo <= 0.0:
+            raise ValueError(f"scene key 'randomize.{k}' is drawn log-uniformly: low must be "
+                             f"> 0, got {lo:g}")
+        out.append((k, lo, hi))
+    return tuple(sorted(out))
+
+
+def draw_physics(scene: "Scene", rng) -> dict:
+    """One episode's draw of the scene's ``randomize`` keys with ``rng`` (a numpy Generator):
+    log-uniform for ``LOG_UNIFORM`` keys, uniform otherwise."""
+    out = {}
+    for k, lo, hi in scene.randomize:
+        if k in LOG_UNIFORM:
+            x = math.exp(rng.uniform(math.log(lo), math.log(hi)))
+        else:
+            x = rng.uniform(lo, hi)
+        out[k] = float(min(max(x, lo), hi))
+    return out
+
+
+def episode_scene(scene: "Scene", draw: dict) -> "Scene":
+    """The scene of one episode of a randomised scene: its draw in place of the nominal
+    values (every draw within the ranges is valid: ``validate`` checks the corners)."""
+    return dataclasses.replace(scene, randomize=(), **draw)
 
 
 def contact_radius_max(s: "Scene") -> float:
@@ -237,6 +298,22 @@ def validate(scene: Scene) -> Scene:
                          "loaded massless runner has no force equilibrium once the contact "
                          "slides, and the env cannot report that case): give the runner a "
                          "mass > 0, raise N_min or mu, or lower |F_ext|")
+    if s.randomize:
+        import itertools
+        for k, lo, hi in s.randomize:
+            nominal = getattr(s, k)
+            if not lo <= nominal <= hi:
+                raise ValueError(f"scene key '{k}' = {nominal:g} (the nominal value the "
+                                 f"baselines design for) must lie in its randomize range "
+                                 f"[{lo:g}, {hi:g}]")
+        keys = [k for k, _, _ in s.randomize]
+        for corner in itertools.product(*[(lo, hi) for _, lo, hi in s.randomize]):
+            draw = dict(zip(keys, corner))
+            try:
+                validate(episode_scene(s, draw))
+            except ValueError as e:
+                raise ValueError(f"scene key 'randomize': the draw {draw} gives an invalid "
+                                 f"scene: {e}") from None
     a_max = math.sqrt(s.R * (3 * s.N_max / (4 * s.E_star * math.sqrt(s.R))) ** (2 / 3))
     if a_max > 0.5 * s.R:
         raise ValueError(f"scene keys 'N_max', 'E_star' and 'R' give a contact radius "

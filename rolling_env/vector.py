@@ -425,6 +425,12 @@ class BatchCore(CellViews):
         self.num_threads = check_num_threads(num_threads)
         self.num_envs = n
         self.scene = load_scene(scene, **overrides)
+        if self.scene.randomize:  # one compiled call steps one physics for the whole batch
+            keys = ", ".join(k for k, _, _ in self.scene.randomize)
+            raise ValueError(f"scene {self.scene.name!r} draws {keys} per episode (randomize): "
+                             "the batched envs step one physics for all envs; use single "
+                             "envs (gym.make, make_vec(..., vectorization_mode='sync'), SB3's "
+                             "DummyVecEnv: agents.train --vec-env dummy)")
         self.max_episode_steps = check_time_limit(max_episode_steps, self.scene)
         drive, self.a_max = build_drive(self.scene)
         self.drive = drive  # template (grid, scales)
