@@ -94,6 +94,9 @@ class RollingDriveEnv(gym.Env):
     governs the random draws only: in ``loaded`` a negative target runs with the load);
     "target" is the only option.
 
+    A scene with ``randomize`` (docs/environment.md) draws mu, runner_mass and F_ext per
+    episode at reset, after the target; ``info["scene_draw"]`` holds the draw.
+
     ## Episode End
     No terminal state (``terminated`` is always False).  The env truncates after the scene's
     ``episode_steps`` ticks (512 in the shipped scenes; ``episode_steps=n`` overrides it), the
