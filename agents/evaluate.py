@@ -116,7 +116,9 @@ def load_agent(path, env=None, base_scene=None):
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     from .common import parse_kwargs
-    from .residual import ResidualAgent, ResidualVecEnv
+    from rolling_env.env import OBS_NAMES
+
+    from .residual import N_BASE, ResidualAgent, ResidualVecEnv
 
     path = Path(path)
     cfg_path = path.parent / "config.yml"
@@ -133,6 +135,11 @@ def load_agent(path, env=None, base_scene=None):
     stats = path.with_name(path.stem + "_vecnormalize.pkl")
     vecnorm = None
     residual = _residual_of(cfg, path)
+    width = getattr(model.observation_space, "shape", (0,))[0]
+    if residual is None and width == len(OBS_NAMES) + N_BASE:
+        raise ValueError(f"{path} takes {width} observations: it is a residual agent (the env's "
+                         f"{len(OBS_NAMES)} and its baseline's action), and the config.yml of "
+                         "its run, which names the baseline, is not beside it")
     if stats.exists():
         scene = env.unwrapped.scene if env is not None else "default"
         venv = DummyVecEnv([lambda: rolling_env.make(scene)])
@@ -648,10 +655,11 @@ def write_tables(rows: list[dict], out: Path, episodes: int | None = None,
                   "work", "",
                   "Best baseline = the Eq. 32 controller with the lower mean final error in the "
                   "scene.", "",
-                  "*First met in training*: the env steps and wall seconds at which a "
-                  "periodic evaluation of the run (agents.train's, --eval-episodes on targets of "
-                  "its own) first met the goal against this baseline's numbers; 'not logged' "
-                  "for runs from before the log.", "",
+                  "*First met in training* (indicative): the env steps and wall seconds at "
+                  "which a periodic evaluation of the run (agents.train's: a few episodes on "
+                  "targets of its own, not these) first met the goal against this baseline's "
+                  "numbers above, so it can disagree with *met*; 'not logged' for runs from "
+                  "before the log.", "",
                   "| scene | agent | best baseline | final error agent / baseline | "
                   "slip work agent / baseline | met | first met in training (env steps, "
                   "wall s) |", "|---|---|---|---|---|---|---|"]

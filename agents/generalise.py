@@ -13,7 +13,8 @@ agents adapt only as far as their observations let them.
 
 Per scene and variant: the IQM final |error| / tolerance and slip work over runs x targets
 with 95% stratified bootstrap intervals and the probability of improvement over the better
-baseline (``agents.stats``); the held-out targets and seeds are those of ``agents.evaluate``.
+baseline (``agents.stats``); the held-out targets and seeds are the first ``--episodes`` of
+``agents.evaluate``'s 20.
 Writes ``generalisation.md`` and ``generalisation.csv`` under ``--out`` (all or nothing).
 """
 from __future__ import annotations
@@ -36,6 +37,7 @@ from .evaluate import (BASELINES, EPISODES_MAX, EVAL_SEED, controllers_for, epis
 
 SHIPPED = ("default", "heavy_inf_friction", "light_stiff", "loaded", "resonant")
 FACTORS = {"mu": (0.5, 2.0), "runner_mass": (0.5, 2.0), "F_ext": (0.5, 1.5)}
+COMPARED = 20  # targets per scene in results/comparison.md
 
 
 def variants(scene) -> list[tuple[str, dict]]:
@@ -69,7 +71,8 @@ def _nominal_controllers(scene: str, runs: Path, model: str = "final") -> dict:
 def evaluate_variants(scene: str, runs: Path, episodes: int, ctrls: dict) -> list[dict]:
     """Rows (as ``agents.evaluate.evaluate_scene``'s, with per-episode lists) of every
     controller on every variant of ``scene``; a row's ``scene`` is ``<key> <variant>``."""
-    targets = held_out_targets(scene, episodes)
+    # the first ``episodes`` of the comparison's targets (drawn as a set of COMPARED)
+    targets = held_out_targets(scene, max(episodes, COMPARED))[:episodes]
     rows = []
     for label, overrides in variants(scene):
         env = rolling_env.make(scene, **overrides)
@@ -80,7 +83,8 @@ def evaluate_variants(scene: str, runs: Path, episodes: int, ctrls: dict) -> lis
             row = {"scene": f"{scene_key(scene)} {label}", "variant": label,
                    "base_scene": scene_key(scene), "controller": name, "tolerance": tol,
                    "model_file": getattr(ctrl, "file", "-"), "episodes": len(per),
-                   "config_key": _config(ctrl), "train_env_steps": 0,
+                   "config_key": _config(ctrl),
+                   "train_env_steps": _budget(getattr(ctrl, "run", None))["train_env_steps"],
                    "trained_numerics": getattr(ctrl, "numerics", "")}
             for key in ("final_abs_error", "slip_work"):
                 vals = [float(p[key]) for p in per]
@@ -99,8 +103,15 @@ def _config(ctrl):
     return _config_key(getattr(ctrl, "run", None))
 
 
+def _budget(run):
+    from .evaluate import _budget as budget
+    return budget(run)
+
+
 def write(rows: list[dict], stats: list[dict], out: Path, episodes: int) -> None:
+    from .evaluate import numerics_marks
     from .stats import markdown
+    marks = numerics_marks(rows)
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["scene", "variant", "controller", "episode", "final_abs_error_tol", "slip_work"])
@@ -114,10 +125,13 @@ def write(rows: list[dict], stats: list[dict], out: Path, episodes: int) -> None
              "changes one physics key of a shipped scene (friction coefficient x0.5 and x2 "
              "where finite, runner mass x0.5 and x2, load x0.5 and x1.5 where there is one); "
              "the baselines are designed and the agents trained on the nominal scene, and "
-             f"each controller runs the same {episodes} held-out targets as in "
-             "comparison.md (seed "
-             f"{EVAL_SEED} + i).  Per-episode values in generalisation.csv.", ""]
-    lines += markdown(stats)[1:]  # the section's own heading is this file's
+             f"each controller runs the first {episodes} of comparison.md's {COMPARED} "
+             f"held-out targets (env seed {EVAL_SEED} + i).  Per-episode values in "
+             "generalisation.csv.", ""]
+    lines += markdown(stats, marks)[1:]  # the section's own heading is this file's
+    if marks:
+        lines += [""] + [f"* [{k}] trained on other numerics or reward weights: {note}"
+                         for note, k in marks.items()]
     atomic_write(out / "generalisation.md", lambda p: Path(p).write_text("\n".join(lines) + "\n"))
 
 

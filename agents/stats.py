@@ -162,14 +162,14 @@ def markdown(stats: list[dict], marks: dict | None = None) -> list[str]:
 def plot_intervals(stats: list[dict], path) -> None:
     """One panel per scene: the IQM final error / tolerance of each configuration with its
     interval (log axis), the better baseline's IQM and half of it as lines."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     from .common import atomic_write
     scenes = list(dict.fromkeys(s["scene"] for s in stats))
-    fig, axes = plt.subplots(len(scenes), 1, figsize=(7, 1.2 + 0.45 * len(stats)),
-                             squeeze=False)
+    fig = Figure(figsize=(7, 1.2 + 0.45 * len(stats)))  # no pyplot: no global state touched
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(len(scenes), 1, squeeze=False)
     for ax, scene in zip(axes[:, 0], scenes):
         ss = [s for s in stats if s["scene"] == scene]
         y = np.arange(len(ss))[::-1]
@@ -190,4 +190,3 @@ def plot_intervals(stats: list[dict], path) -> None:
     axes[0, 0].legend(fontsize=7, loc="best")
     fig.tight_layout()
     atomic_write(path, lambda p: fig.savefig(p, dpi=100, format="png"))
-    plt.close(fig)

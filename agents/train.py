@@ -296,6 +296,8 @@ def _setup(args, command=None):
         env = make_vec_env(scene, n_envs, args.seed, env_kwargs, kind=kind,
                            num_threads=args.num_threads)
     except ValueError as e:  # scene overrides in env_kwargs
+        if "(randomize)" in str(e):  # --vec-env batched on a randomised scene
+            raise ValueError(f"--vec-env batched: {e}") from None
         raise ValueError(f"hyper-parameter 'env_kwargs': {e}") from None
     trained = env.get_attr("scene", [0])[0]  # with the overrides of env_kwargs applied
     vec_env["num_threads"] = "auto" if args.num_threads is None else args.num_threads

@@ -123,11 +123,12 @@ _SPEC = {  # key: (type, lo, hi, lo_open, allow_inf); physical ranges, wide but 
     "grid_levels": (int, 0, 12, False, False),
     "w_final": (float, 0.0, 1e6, False, False),
 }
+#: keys a scene file may leave out (their defaults above)
 _OPTIONAL = {"accuracy", "grid_levels", "w_final", "randomize"}
 #: keys a scene may draw per episode (``randomize``); mu and runner_mass log-uniformly (they
 #: scale), F_ext uniformly
 RANDOMIZABLE = ("mu", "runner_mass", "F_ext")
-LOG_UNIFORM = ("mu", "runner_mass")  # keys a scene file may leave out (their defaults above)
+LOG_UNIFORM = ("mu", "runner_mass")
 E_OVER_G_RANGE = (0.01, 100.0)  # E*/G*: about 1-2 for real materials (isotropic, 0 <= nu <= 0.5)
 
 _FIELDS = [f.name for f in dataclasses.fields(Scene)]

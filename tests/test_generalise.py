@@ -30,12 +30,17 @@ def test_variants_change_one_physics_key_by_its_factor(scene, keys):
 @pytest.fixture(scope="module")
 def residual_run(tmp_path_factory):
     from agents.train import main as train_main
+    import yaml
     base = tmp_path_factory.mktemp("gen")
     run = base / "runs" / "loaded" / "ppo-residual_seed0"
-    assert train_main(["--algo", "ppo", "--scene", "loaded", "--n-timesteps", "128",
-                       "--n-envs", "2", "--eval-freq", "128", "--eval-episodes", "1",
-                       "--no-progress", "--residual", "eq32-feedback", "--run-dir",
-                       str(run)]) == 0
+    conf = base / "hp.yml"  # trained with the terminal reward term, as the shipped entries
+    conf.write_text(yaml.safe_dump({"loaded": {
+        "env_kwargs": {"scene": "loaded", "w_final": 5.0}, "n_steps": 64, "batch_size": 64,
+        "normalize": "{'norm_obs': True, 'norm_reward': True}"}}))
+    assert train_main(["--algo", "ppo", "--scene", "loaded", "--conf", str(conf),
+                       "--n-timesteps", "128", "--n-envs", "2", "--eval-freq", "128",
+                       "--eval-episodes", "1", "--no-progress", "--residual", "eq32-feedback",
+                       "--run-dir", str(run)]) == 0
     return base / "runs"
 
 
@@ -65,7 +70,8 @@ def test_generalise_writes_every_variant_and_controller(residual_run, tmp_path):
     assert all(float(r["final_abs_error_tol"]) >= 0 for r in rows)
     md = (out / "generalisation.md").read_text()
     for v in labels:
-        assert f"| loaded {v} | ppo-residual | 1 |" in md, md
+        assert f"| loaded {v} | ppo-residual [1] | 1 |" in md, md
+    assert "* [1] trained on other numerics or reward weights: w_final 5 (now 0)" in md, md
     # the variants differ: the feedback baseline's final errors are not all the same
     fb = {r["variant"]: r["final_abs_error_tol"] for r in rows
           if r["controller"] == "eq32-feedback" and r["episode"] == "0"}

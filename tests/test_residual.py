@@ -143,6 +143,14 @@ def test_a_trained_residual_run_loads_as_a_residual_agent(tmp_path, monkeypatch)
     # a barely trained policy keeps every action within scale of the baseline's first tick
     assert np.all(np.abs(_actions(data)[0] - _actions(base)[0]) <= 0.1 + 1e-6)
     assert np.isfinite(data["final_error"])
+    # without its config.yml a residual model cannot be told from a plain one: refused, named
+    import shutil
+    alone = tmp_path / "alone"
+    alone.mkdir()
+    for f in ("model.zip", "model_vecnormalize.pkl"):
+        shutil.copy(run / f, alone / f)
+    with pytest.raises(ValueError, match="it is a residual agent"):
+        load_agent(alone / "model.zip", env)
 
 
 def test_augment_keeps_the_env_observation_first():
