@@ -30,6 +30,7 @@ reset gives).  The action is built by ``rolling_env.actions.from_controls``,
 the inverse of the env's action mapping ``to_controls`` (one module for both; the compiled
 env tick is tested to map actions exactly as ``to_controls``, tests/test_env.py).
 """
+
 from __future__ import annotations
 
 import math
@@ -79,7 +80,8 @@ class Eq32Design:
                 f"period, but omega_R_max = {sc.omega_R_max:g} m/s allows w = {w_rate:.3g} "
                 f"and the strokes allow w = {w_stroke:.3g}; the Eq. 32 baselines need "
                 f"omega_R_max >= {need_rate:.3g} m/s and stroke_roll, stroke_translate >= "
-                f"{need_stroke:.3g} m")
+                f"{need_stroke:.3g} m"
+            )
 
     def _w_limits(self) -> tuple[float, float]:
         """Largest w the rolling rate allows in a half period, and the largest the strokes
@@ -105,7 +107,7 @@ class Eq32Design:
         sc = self.scene
         if math.isinf(sc.mu):
             return sc.creep_max
-        limit = sc.mu * (sc.E_star / sc.G_star) * self.a1 ** 2 / sc.R  # slip limit at the centre
+        limit = sc.mu * (sc.E_star / sc.G_star) * self.a1**2 / sc.R  # slip limit at the centre
         return min(sc.creep_max, self.slip_margin * limit / (self.w * self.a1))
 
     @cached_property
@@ -131,8 +133,9 @@ class Eq32Design:
         if creep <= self.creep_cap:
             return delta, creep
         creep = self.creep_cap
-        delta = float(np.clip(analytic.invert_eq32_delta(ratio, 1 - creep, self.w),
-                              self.delta_min, 1.0))
+        delta = float(
+            np.clip(analytic.invert_eq32_delta(ratio, 1 - creep, self.w), self.delta_min, 1.0)
+        )
         return delta, creep
 
     def speed(self, delta: float, creep: float) -> float:
@@ -142,9 +145,9 @@ class Eq32Design:
         """Action of tick k (0 = episode start) for (delta, creep) and drive direction +-1."""
         sc = self.scene
         h = self.half_ticks
-        moving = 1 if ((k + h // 2) // h) % 2 == 0 else -1   # patch moves +c first, from 0
+        moving = 1 if ((k + h // 2) // h) % 2 == 0 else -1  # patch moves +c first, from 0
         forth = moving == direction
-        N = sc.N_max if forth else sc.N_max * delta ** 1.5
+        N = sc.N_max if forth else sc.N_max * delta**1.5
         return from_controls(sc, N, moving * self.omega_R, creep)
 
     def relaxation_time(self, delta: float) -> float:
@@ -156,7 +159,7 @@ class Eq32Design:
         sc = self.scene
         _, Q = analytic.impulse_coefficients(delta, self.w)
         tau = 2 * self.half_ticks * sc.dt
-        return sc.runner_mass * self.omega_R ** 2 * tau / (sc.G_star * self.a1 ** 3 * Q)
+        return sc.runner_mass * self.omega_R**2 * tau / (sc.G_star * self.a1**3 * Q)
 
     def stop(self, ticks_stopped: int) -> np.ndarray:
         """Stop driving: one tick at the smallest force releases the stored tangential
@@ -170,9 +173,11 @@ def scene_of(env) -> Scene:
     """The ``Scene`` of an env, a vector env (SB3 or Gymnasium) or a scene itself."""
     if isinstance(env, Scene):
         return env
-    getters = (lambda: env.get_attr("scene")[0],           # SB3 VecEnv (wrappers forward)
-               lambda: env.unwrapped.scene,                 # gymnasium env behind wrappers
-               lambda: env.unwrapped.core.scene)            # rolling_env's gymnasium vector env
+    getters = (
+        lambda: env.get_attr("scene")[0],  # SB3 VecEnv (wrappers forward)
+        lambda: env.unwrapped.scene,  # gymnasium env behind wrappers
+        lambda: env.unwrapped.core.scene,
+    )  # rolling_env's gymnasium vector env
     for get in getters:
         try:
             sc = get()
@@ -180,8 +185,9 @@ def scene_of(env) -> Scene:
             continue
         if isinstance(sc, Scene):
             return sc
-    raise TypeError(f"cannot find the scene of {env!r}: pass a RollingDrive env, vector env "
-                    "or Scene")
+    raise TypeError(
+        f"cannot find the scene of {env!r}: pass a RollingDrive env, vector env or Scene"
+    )
 
 
 TIME_FRACTION = OBS_NAMES.index("time_fraction")
@@ -207,9 +213,13 @@ class _Eq32Base:
         if self._k is None or len(self._k) != n:
             self._k = np.zeros(n, dtype=np.int64)
             self._reset_all(n)
-        starts = (np.ones(n, bool) if episode_start is None and self._fresh
-                  else np.asarray(episode_start if episode_start is not None else np.zeros(n),
-                                  bool).reshape(n))
+        starts = (
+            np.ones(n, bool)
+            if episode_start is None and self._fresh
+            else np.asarray(
+                episode_start if episode_start is not None else np.zeros(n), bool
+            ).reshape(n)
+        )
         # a reset observation also says so itself (time_fraction is 0 only there), so a plain
         # Gymnasium loop without episode_start restarts the plan too
         starts = starts | (ob[:, TIME_FRACTION] == 0.0)
@@ -287,12 +297,21 @@ class Eq32Feedback(_Eq32Base):
     resumes once |e| exceeds the tolerance.
     """
 
-    def __init__(self, scene: Scene, approach_periods: float = 3.0,
-                 velocity_periods: float = 2.0, brake_fraction: float = 0.5,
-                 bias_gain: float = 0.3, stop_fraction: float = 0.5, **design_kw):
+    def __init__(
+        self,
+        scene: Scene,
+        approach_periods: float = 3.0,
+        velocity_periods: float = 2.0,
+        brake_fraction: float = 0.5,
+        bias_gain: float = 0.3,
+        stop_fraction: float = 0.5,
+        **design_kw,
+    ):
         super().__init__(scene, **design_kw)
-        for name, val in (("approach_periods", approach_periods),
-                          ("velocity_periods", velocity_periods)):
+        for name, val in (
+            ("approach_periods", approach_periods),
+            ("velocity_periods", velocity_periods),
+        ):
             if not val > 0:
                 raise ValueError(f"{name} must be > 0, got {val}")
         for name, val in (("brake_fraction", brake_fraction), ("stop_fraction", stop_fraction)):
@@ -315,7 +334,7 @@ class Eq32Feedback(_Eq32Base):
         self._e_prev = np.zeros(n)
         self._k_prev = np.zeros(n, dtype=np.int64)
         self._bias = np.zeros(n)
-        self._pred = np.full(n, np.nan)   # predicted mean velocity of the running period
+        self._pred = np.full(n, np.nan)  # predicted mean velocity of the running period
         self._r = np.zeros(n)
 
     def _start(self, i, o):
@@ -354,8 +373,7 @@ class Eq32Feedback(_Eq32Base):
         tol = self.scene.tolerance
         if k == 0 or (k + h // 2) % (2 * h) == 0:  # re-plan once per period
             e = self._error(o)
-            v = ((self._e_prev[i] - e) / ((k - self._k_prev[i]) * self.scene.dt)
-                 if k > 0 else 0.0)
+            v = (self._e_prev[i] - e) / ((k - self._k_prev[i]) * self.scene.dt) if k > 0 else 0.0
             if np.isfinite(self._pred[i]) and self._r[i] < 1:
                 # misprediction of the period's mean velocity -> bias of the working point
                 self._bias[i] += self.bias_gain * (v - self._pred[i])

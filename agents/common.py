@@ -1,4 +1,5 @@
 """Shared pieces of training and evaluation: hyper-parameters, vector envs, atomic saving."""
+
 from __future__ import annotations
 
 import ast
@@ -23,12 +24,14 @@ def load_hyperparams(algo: str, scene: str, conf: str | os.PathLike | None = Non
     path = Path(conf) if conf else CONF_DIR / f"{algo}.yml"
     table = read_yaml(path, "hyper-parameter file")
     if not isinstance(table, dict) or not (scene in table or "RollingDrive-v0" in table):
-        raise ValueError(f"{path}: needs an entry for scene {scene!r} or for RollingDrive-v0 "
-                         "(RL Zoo format)")
+        raise ValueError(
+            f"{path}: needs an entry for scene {scene!r} or for RollingDrive-v0 (RL Zoo format)"
+        )
     key = scene if scene in table else "RollingDrive-v0"
     if not isinstance(table[key], dict):
-        raise ValueError(f"{path}: the entry {key!r} must be a mapping of hyper-parameters, got "
-                         f"{table[key]!r}")
+        raise ValueError(
+            f"{path}: the entry {key!r} must be a mapping of hyper-parameters, got {table[key]!r}"
+        )
     hp = dict(table[key])
     if key != scene:
         env_kwargs = hp.get("env_kwargs") or {}
@@ -44,7 +47,7 @@ def one_line(e: BaseException, limit: int = 200) -> str:
     msg = " ".join(str(e).split())
     msg = msg.split(". ")[0]
     if len(msg) > limit:
-        msg = msg[:limit - 3] + "..."
+        msg = msg[: limit - 3] + "..."
     return f"{type(e).__name__}: {msg}" if msg else type(e).__name__
 
 
@@ -60,13 +63,23 @@ def run_config(run: str | os.PathLike) -> dict | None:
     if cfg is None:
         cfg = {}
     if not isinstance(cfg, dict):
-        raise ValueError(f"run config {str(path)!r} must hold a mapping (written by "
-                         f"agents.train), got a {type(cfg).__name__}")
-    for key, kind in (("env_kwargs", dict), ("scene_fields", dict), ("algo", str),
-                      ("scene", str), ("scene_key", str), ("scene_digest", str)):
+        raise ValueError(
+            f"run config {str(path)!r} must hold a mapping (written by "
+            f"agents.train), got a {type(cfg).__name__}"
+        )
+    for key, kind in (
+        ("env_kwargs", dict),
+        ("scene_fields", dict),
+        ("algo", str),
+        ("scene", str),
+        ("scene_key", str),
+        ("scene_digest", str),
+    ):
         if cfg.get(key) is not None and not isinstance(cfg[key], kind):
-            raise ValueError(f"run config {str(path)!r}: {key!r} must be a "
-                             f"{'mapping' if kind is dict else 'string'}, got {cfg[key]!r}")
+            raise ValueError(
+                f"run config {str(path)!r}: {key!r} must be a "
+                f"{'mapping' if kind is dict else 'string'}, got {cfg[key]!r}"
+            )
     return cfg
 
 
@@ -75,6 +88,7 @@ def _torch_attr(parts: list[str]):
     """``nn.ReLU`` / ``torch.nn.ReLU`` / ``th.optim.Adam``: a torch.nn module class or a
     torch.optim optimizer class, nothing else (RL Zoo writes activations this way)."""
     import torch
+
     if parts[:1] in (["torch"], ["th"]):
         parts = parts[1:]
     if len(parts) == 2 and parts[0] in ("nn", "optim"):
@@ -82,8 +96,10 @@ def _torch_attr(parts: list[str]):
         obj = getattr(getattr(torch, parts[0]), parts[1], None)
         if isinstance(obj, type) and issubclass(obj, base):
             return obj
-    raise ValueError(f"{'.'.join(parts)!r} is not a torch.nn module or torch.optim optimizer "
-                     "class (allowed names: nn.X, torch.nn.X, th.nn.X, optim.X, th.optim.X)")
+    raise ValueError(
+        f"{'.'.join(parts)!r} is not a torch.nn module or torch.optim optimizer "
+        "class (allowed names: nn.X, torch.nn.X, th.nn.X, optim.X, th.optim.X)"
+    )
 
 
 def _literal(node):
@@ -100,8 +116,13 @@ def _literal(node):
         return items if isinstance(node, ast.List) else tuple(items)
     if isinstance(node, ast.Dict) and None not in node.keys:
         return {_literal(k): _literal(v) for k, v in zip(node.keys, node.values)}
-    if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "dict"
-            and not node.args and all(kw.arg is not None for kw in node.keywords)):
+    if (
+        isinstance(node, ast.Call)
+        and isinstance(node.func, ast.Name)
+        and node.func.id == "dict"
+        and not node.args
+        and all(kw.arg is not None for kw in node.keywords)
+    ):
         return {kw.arg: _literal(kw.value) for kw in node.keywords}
     if isinstance(node, ast.Attribute):
         parts = []
@@ -110,8 +131,10 @@ def _literal(node):
             node = node.value
         if isinstance(node, ast.Name):
             return _torch_attr([node.id] + parts)
-    raise ValueError(f"{ast.unparse(node)!r} is not allowed (only literals, lists, dict(...), "
-                     "{...} and torch classes such as nn.ReLU)")
+    raise ValueError(
+        f"{ast.unparse(node)!r} is not allowed (only literals, lists, dict(...), "
+        "{...} and torch classes such as nn.ReLU)"
+    )
 
 
 _TORCH_NAME = re.compile(r"^((torch|th)\.)?(nn|optim)\.\w+$")
@@ -125,12 +148,14 @@ def parse_kwargs(text) -> dict | None:
     if text is None:
         return {}
     if isinstance(text, dict):
-        return {k: _torch_attr(v.split(".")) if isinstance(v, str) and _TORCH_NAME.match(v)
-                else v for k, v in text.items()}
+        return {
+            k: _torch_attr(v.split(".")) if isinstance(v, str) and _TORCH_NAME.match(v) else v
+            for k, v in text.items()
+        }
     if isinstance(text, bool):
         return {} if text else None
     if not isinstance(text, str):
-        raise ValueError(f"must be a mapping or a string such as \"dict(a=1)\", got {text!r}")
+        raise ValueError(f'must be a mapping or a string such as "dict(a=1)", got {text!r}')
     try:
         node = ast.parse(text.strip(), mode="eval").body
     except SyntaxError as e:
@@ -145,34 +170,54 @@ def parse_kwargs(text) -> dict | None:
 
 # ----------------------------------------------------------------- hyper-parameter checks
 #: RL Zoo keys the training script handles itself (the rest go to the algorithm's __init__)
-ZOO_KEYS = frozenset({"n_envs", "n_timesteps", "policy", "normalize", "env_kwargs",
-                      "noise_type", "noise_std"})
+ZOO_KEYS = frozenset(
+    {"n_envs", "n_timesteps", "policy", "normalize", "env_kwargs", "noise_type", "noise_std"}
+)
 #: keys of this project's own (not RL Zoo's): a residual policy on an Eq. 32 baseline
 #: (``agents.residual``)
 RESIDUAL_KEYS = frozenset({"residual", "residual_scale"})
 #: keywords of the algorithms' __init__ that the script sets (or that YAML cannot express)
-_SET_BY_SCRIPT = {"env": "the env is built from --scene", "seed": "use --seed",
-                  "verbose": "set by the script", "device": "set by the script (cpu)",
-                  "tensorboard_log": "the run folder's tb/ is used",
-                  "_init_setup_model": "set by SB3", "action_noise": "use noise_type and noise_std",
-                  "rollout_buffer_class": "a Python class: not supported in the YAML",
-                  "replay_buffer_class": "a Python class: not supported in the YAML"}
+_SET_BY_SCRIPT = {
+    "env": "the env is built from --scene",
+    "seed": "use --seed",
+    "verbose": "set by the script",
+    "device": "set by the script (cpu)",
+    "tensorboard_log": "the run folder's tb/ is used",
+    "_init_setup_model": "set by SB3",
+    "action_noise": "use noise_type and noise_std",
+    "rollout_buffer_class": "a Python class: not supported in the YAML",
+    "replay_buffer_class": "a Python class: not supported in the YAML",
+}
 _INF = float("inf")
 #: ranges (lo, hi, lo_open, hi_open) of the numbers; applied to a schedule's initial value too
-RANGES = {"gamma": (0, 1, True, False), "gae_lambda": (0, 1, False, False),
-          "learning_rate": (0, _INF, True, True), "clip_range": (0, _INF, True, True),
-          "clip_range_vf": (0, _INF, True, True), "tau": (0, 1, True, False),
-          "ent_coef": (0, _INF, False, True), "vf_coef": (0, _INF, False, True),
-          "max_grad_norm": (0, _INF, True, True), "target_kl": (0, _INF, True, True),
-          "target_policy_noise": (0, _INF, False, True),
-          "target_noise_clip": (0, _INF, False, True), "noise_std": (0, _INF, False, True),
-          "n_envs": (1, 4096, False, False), "n_timesteps": (1, 10**12, False, False),
-          "n_steps": (1, _INF, False, True), "batch_size": (1, _INF, False, True),
-          "n_epochs": (1, _INF, False, True), "buffer_size": (1, _INF, False, True),
-          "learning_starts": (0, _INF, False, True), "gradient_steps": (-1, _INF, False, True),
-          "policy_delay": (1, _INF, False, True), "target_update_interval": (1, _INF, False, True),
-          "sde_sample_freq": (-1, _INF, False, True), "stats_window_size": (1, _INF, False, True),
-          "train_freq": (1, _INF, False, True)}
+RANGES = {
+    "gamma": (0, 1, True, False),
+    "gae_lambda": (0, 1, False, False),
+    "learning_rate": (0, _INF, True, True),
+    "clip_range": (0, _INF, True, True),
+    "clip_range_vf": (0, _INF, True, True),
+    "tau": (0, 1, True, False),
+    "ent_coef": (0, _INF, False, True),
+    "vf_coef": (0, _INF, False, True),
+    "max_grad_norm": (0, _INF, True, True),
+    "target_kl": (0, _INF, True, True),
+    "target_policy_noise": (0, _INF, False, True),
+    "target_noise_clip": (0, _INF, False, True),
+    "noise_std": (0, _INF, False, True),
+    "n_envs": (1, 4096, False, False),
+    "n_timesteps": (1, 10**12, False, False),
+    "n_steps": (1, _INF, False, True),
+    "batch_size": (1, _INF, False, True),
+    "n_epochs": (1, _INF, False, True),
+    "buffer_size": (1, _INF, False, True),
+    "learning_starts": (0, _INF, False, True),
+    "gradient_steps": (-1, _INF, False, True),
+    "policy_delay": (1, _INF, False, True),
+    "target_update_interval": (1, _INF, False, True),
+    "sde_sample_freq": (-1, _INF, False, True),
+    "stats_window_size": (1, _INF, False, True),
+    "train_freq": (1, _INF, False, True),
+}
 NOISE_TYPES = ("normal", "ornstein-uhlenbeck")
 
 
@@ -182,6 +227,7 @@ def _kinds(annotation) -> set:
     import collections.abc
     import types
     import typing
+
     origin = typing.get_origin(annotation)
     if origin in (typing.Union, types.UnionType):
         return set().union(*(_kinds(a) for a in typing.get_args(annotation)))
@@ -205,6 +251,7 @@ def _in_range(key, x):
     """``x`` (a number) in ``RANGES[key]`` (``validation.check_range``: NaN and inf refused
     too), or a ValueError naming the key and the range."""
     from rolling_env.validation import check_range
+
     lo, hi, lo_open, hi_open = RANGES.get(key, (-_INF, _INF, True, True))
     check_range(f"hyper-parameter {key!r}", x, lo, hi, lo_open=lo_open, hi_open=hi_open)
     return x
@@ -212,8 +259,11 @@ def _in_range(key, x):
 
 def _int(key, v):
     """An integer (a float with an integer value too, for ``1e6``), never truncated."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or (
-            isinstance(v, float) and not (v == v and abs(v) != _INF and v == int(v))):
+    if (
+        isinstance(v, bool)
+        or not isinstance(v, (int, float))
+        or (isinstance(v, float) and not (v == v and abs(v) != _INF and v == int(v)))
+    ):
         raise ValueError(f"hyper-parameter {key!r} must be an integer, got {v!r}")
     return _in_range(key, int(v))
 
@@ -224,7 +274,7 @@ def _number(key, v):
     return _in_range(key, float(v))
 
 
-def check_value(key: str, v, kinds: set):
+def check_value(key: str, v, kinds: set):  # noqa: C901 (one branch per annotated type SB3 uses)
     """``v`` checked against the kinds an SB3 keyword allows (and ``RANGES``), converted
     (an RL Zoo ``lin_<x>`` string to a linear schedule, a kwargs string to a dict)."""
     if v is None and "none" in kinds:
@@ -232,22 +282,24 @@ def check_value(key: str, v, kinds: set):
     if "any" in kinds:
         return v
     if "class" in kinds and not kinds - {"class", "none"}:
-        raise ValueError(f"hyper-parameter {key!r} takes a Python class: not supported in the "
-                         "YAML")
+        raise ValueError(f"hyper-parameter {key!r} takes a Python class: not supported in the YAML")
     if "bool" in kinds:
         if not isinstance(v, bool):
             raise ValueError(f"hyper-parameter {key!r} must be true or false, got {v!r}")
         return v
     if "schedule" in kinds and isinstance(v, str):
         from stable_baselines3.common.utils import LinearSchedule
+
         head, _, tail = v.partition("_")
         try:
             x = float(tail) if head == "lin" else None
         except ValueError:
             x = None
         if x is None:
-            raise ValueError(f"hyper-parameter {key!r} must be a number or 'lin_<number>' (RL "
-                             f"Zoo's linear schedule), got {v!r}")
+            raise ValueError(
+                f"hyper-parameter {key!r} must be a number or 'lin_<number>' (RL "
+                f"Zoo's linear schedule), got {v!r}"
+            )
         return LinearSchedule(_in_range(key, x), 0.0, 1.0)  # x * progress_remaining
     if key == "ent_coef" and isinstance(v, str) and "str" in kinds:  # SAC: auto, auto_0.1
         head, _, tail = v.partition("_")
@@ -256,18 +308,22 @@ def check_value(key: str, v, kinds: set):
         except ValueError:
             ok = False
         if not ok:
-            raise ValueError(f"hyper-parameter 'ent_coef' must be a number, 'auto' or "
-                             f"'auto_<initial value>', got {v!r}")
+            raise ValueError(
+                f"hyper-parameter 'ent_coef' must be a number, 'auto' or "
+                f"'auto_<initial value>', got {v!r}"
+            )
         return v
     if key == "target_entropy" and isinstance(v, str):
         if v != "auto":
-            raise ValueError(f"hyper-parameter 'target_entropy' must be a number or 'auto', "
-                             f"got {v!r}")
+            raise ValueError(
+                f"hyper-parameter 'target_entropy' must be a number or 'auto', got {v!r}"
+            )
         return v
     if "tuple" in kinds and isinstance(v, (list, tuple)):
         if not (len(v) == 2 and v[1] in ("step", "episode")):
-            raise ValueError(f"hyper-parameter {key!r} must be an integer or [n, 'step' | "
-                             f"'episode'], got {v!r}")
+            raise ValueError(
+                f"hyper-parameter {key!r} must be an integer or [n, 'step' | 'episode'], got {v!r}"
+            )
         return (_int(key, v[0]), v[1])
     if "dict" in kinds:
         try:
@@ -286,10 +342,11 @@ def check_value(key: str, v, kinds: set):
 
 def _algo_class(algo: str):
     import stable_baselines3 as sb3
+
     return {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[algo]
 
 
-def check_hyperparams(algo: str, hp: dict) -> dict:
+def check_hyperparams(algo: str, hp: dict) -> dict:  # noqa: C901 (one check per key of an RL Zoo entry)
     """Validate an entry of the hyper-parameter YAML for ``algo``: every key is either an RL
     Zoo key the script handles (``ZOO_KEYS``) or a keyword of the algorithm's ``__init__``
     (found with ``inspect.signature``), with a value of the type SB3 annotates and in
@@ -302,21 +359,27 @@ def check_hyperparams(algo: str, hp: dict) -> dict:
     ``n_timesteps`` is None when the entry has none."""
     import inspect
     import numbers
+
     cls = _algo_class(algo)
     params = inspect.signature(cls.__init__).parameters
     script = ZOO_KEYS | RESIDUAL_KEYS
     unknown = sorted(k for k in hp if k not in script and k not in params or k == "self")
     if unknown:
-        raise ValueError(f"unknown hyper-parameter(s) {', '.join(map(repr, unknown))} for "
-                         f"{cls.__name__} (keys: the RL Zoo keys {sorted(ZOO_KEYS)}, "
-                         f"{sorted(RESIDUAL_KEYS)} and the keywords of {cls.__name__}.__init__)")
-    out = {"n_envs": _int("n_envs", hp.get("n_envs", 1)),
-           "n_timesteps": (_int("n_timesteps", hp["n_timesteps"]) if "n_timesteps" in hp
-                           else None)}
+        raise ValueError(
+            f"unknown hyper-parameter(s) {', '.join(map(repr, unknown))} for "
+            f"{cls.__name__} (keys: the RL Zoo keys {sorted(ZOO_KEYS)}, "
+            f"{sorted(RESIDUAL_KEYS)} and the keywords of {cls.__name__}.__init__)"
+        )
+    out = {
+        "n_envs": _int("n_envs", hp.get("n_envs", 1)),
+        "n_timesteps": (_int("n_timesteps", hp["n_timesteps"]) if "n_timesteps" in hp else None),
+    }
     policy = hp.get("policy", "MlpPolicy")
     if policy != "MlpPolicy":
-        raise ValueError(f"hyper-parameter 'policy' must be 'MlpPolicy' (the observation is a "
-                         f"flat vector), got {policy!r}")
+        raise ValueError(
+            f"hyper-parameter 'policy' must be 'MlpPolicy' (the observation is a "
+            f"flat vector), got {policy!r}"
+        )
     out["policy"] = policy
     try:
         norm = parse_kwargs(hp.get("normalize", False))
@@ -324,20 +387,31 @@ def check_hyperparams(algo: str, hp: dict) -> dict:
         raise ValueError(f"hyper-parameter 'normalize': {e}") from None
     if norm is not None:
         from stable_baselines3.common.vec_env import VecNormalize
+
         allowed = set(inspect.signature(VecNormalize.__init__).parameters) - {
-            "self", "venv", "training", "gamma", "norm_obs_keys"}
+            "self",
+            "venv",
+            "training",
+            "gamma",
+            "norm_obs_keys",
+        }
         bad = sorted(set(norm) - allowed)
         if bad:
-            raise ValueError(f"hyper-parameter 'normalize': unknown key(s) {bad} (VecNormalize "
-                             f"takes {sorted(allowed)}; gamma is the algorithm's)")
+            raise ValueError(
+                f"hyper-parameter 'normalize': unknown key(s) {bad} (VecNormalize "
+                f"takes {sorted(allowed)}; gamma is the algorithm's)"
+            )
         for k, x in list(norm.items()):
             if k in ("norm_obs", "norm_reward") and not isinstance(x, bool):
-                raise ValueError(f"hyper-parameter 'normalize': {k} must be true or false, "
-                                 f"got {x!r}")
+                raise ValueError(
+                    f"hyper-parameter 'normalize': {k} must be true or false, got {x!r}"
+                )
             if k in ("clip_obs", "clip_reward", "epsilon") and (
-                    isinstance(x, bool) or not isinstance(x, numbers.Real) or not x > 0):
-                raise ValueError(f"hyper-parameter 'normalize': {k} must be a number > 0, got "
-                                 f"{x!r}")
+                isinstance(x, bool) or not isinstance(x, numbers.Real) or not x > 0
+            ):
+                raise ValueError(
+                    f"hyper-parameter 'normalize': {k} must be a number > 0, got {x!r}"
+                )
     out["normalize"] = norm
     env_kwargs = hp.get("env_kwargs") or {}
     if not isinstance(env_kwargs, dict):
@@ -346,11 +420,14 @@ def check_hyperparams(algo: str, hp: dict) -> dict:
     noise_type, noise_std = hp.get("noise_type"), hp.get("noise_std")
     if noise_type is not None or noise_std is not None:
         if "action_noise" not in params:
-            raise ValueError(f"hyper-parameter 'noise_type' / 'noise_std': {cls.__name__} takes "
-                             "no action noise")
+            raise ValueError(
+                f"hyper-parameter 'noise_type' / 'noise_std': {cls.__name__} takes no action noise"
+            )
         if noise_type not in NOISE_TYPES:
-            raise ValueError(f"hyper-parameter 'noise_type' must be one of {NOISE_TYPES} (with "
-                             f"noise_std), got {noise_type!r}")
+            raise ValueError(
+                f"hyper-parameter 'noise_type' must be one of {NOISE_TYPES} (with "
+                f"noise_std), got {noise_type!r}"
+            )
         if noise_std is None:
             raise ValueError("hyper-parameter 'noise_std' is required with noise_type")
         out["action_noise"] = (noise_type, _number("noise_std", noise_std))
@@ -359,30 +436,42 @@ def check_hyperparams(algo: str, hp: dict) -> dict:
     out["residual"] = None
     if hp.get("residual") is not None:
         from .residual import SCALE_DEFAULT, check_residual
+
         try:
-            out["residual"] = check_residual(hp["residual"],
-                                             hp.get("residual_scale", SCALE_DEFAULT))
+            out["residual"] = check_residual(
+                hp["residual"], hp.get("residual_scale", SCALE_DEFAULT)
+            )
         except ValueError as e:
             raise ValueError(f"hyper-parameter {e}") from None
     elif hp.get("residual_scale") is not None:
-        raise ValueError("hyper-parameter 'residual_scale' needs 'residual' (the baseline the "
-                         "policy's actions are added to)")
+        raise ValueError(
+            "hyper-parameter 'residual_scale' needs 'residual' (the baseline the "
+            "policy's actions are added to)"
+        )
     kwargs = {}
     for k, v in hp.items():
         if k in script:
             continue
         if k in _SET_BY_SCRIPT:
-            raise ValueError(f"hyper-parameter {k!r} cannot be set in the YAML: "
-                             f"{_SET_BY_SCRIPT[k]}")
+            raise ValueError(
+                f"hyper-parameter {k!r} cannot be set in the YAML: {_SET_BY_SCRIPT[k]}"
+            )
         kwargs[k] = check_value(k, v, _kinds(params[k].annotation))
     if "policy_kwargs" in kwargs:
         pol = cls.policy_aliases["MlpPolicy"]
         allowed = set(inspect.signature(pol.__init__).parameters) - {
-            "self", "observation_space", "action_space", "lr_schedule", "use_sde"}
+            "self",
+            "observation_space",
+            "action_space",
+            "lr_schedule",
+            "use_sde",
+        }
         bad = sorted(set(kwargs["policy_kwargs"]) - allowed)
         if bad:
-            raise ValueError(f"hyper-parameter 'policy_kwargs': unknown key(s) {bad} for "
-                             f"{pol.__name__} (allowed: {sorted(allowed)})")
+            raise ValueError(
+                f"hyper-parameter 'policy_kwargs': unknown key(s) {bad} for "
+                f"{pol.__name__} (allowed: {sorted(allowed)})"
+            )
         kwargs["policy_kwargs"] = check_policy_kwargs(algo, kwargs["policy_kwargs"])
     out["kwargs"] = kwargs
     return out
@@ -393,8 +482,9 @@ NET_WIDTH_MAX = 1024  # units per hidden layer (the observation has 13 numbers, 
 NET_DEPTH_MAX = 8  # hidden layers per network
 N_CRITICS_MAX = 10
 #: torch.nn.modules.activation classes that are no element-wise activation or need arguments
-_NOT_ACTIVATIONS = frozenset({"MultiheadAttention", "GLU", "Threshold", "Softmax", "Softmax2d",
-                              "Softmin", "LogSoftmax"})
+_NOT_ACTIVATIONS = frozenset(
+    {"MultiheadAttention", "GLU", "Threshold", "Softmax", "Softmax2d", "Softmin", "LogSoftmax"}
+)
 
 
 def activation_classes() -> dict:
@@ -403,24 +493,36 @@ def activation_classes() -> dict:
     attention, GLU (halves its input), the softmax family (across units) and Threshold
     (needs arguments))."""
     import torch
+
     mod = torch.nn.modules.activation
-    return {n: c for n, c in vars(mod).items()
-            if isinstance(c, type) and issubclass(c, torch.nn.Module)
-            and c.__module__ == mod.__name__ and n not in _NOT_ACTIVATIONS}
+    return {
+        n: c
+        for n, c in vars(mod).items()
+        if isinstance(c, type)
+        and issubclass(c, torch.nn.Module)
+        and c.__module__ == mod.__name__
+        and n not in _NOT_ACTIVATIONS
+    }
 
 
 def _layers(name: str, v) -> list:
-    ok = (isinstance(v, (list, tuple)) and len(v) <= NET_DEPTH_MAX
-          and all(isinstance(w, int) and not isinstance(w, bool) and 1 <= w <= NET_WIDTH_MAX
-                  for w in v))
+    ok = (
+        isinstance(v, (list, tuple))
+        and len(v) <= NET_DEPTH_MAX
+        and all(
+            isinstance(w, int) and not isinstance(w, bool) and 1 <= w <= NET_WIDTH_MAX for w in v
+        )
+    )
     if not ok:
-        raise ValueError(f"hyper-parameter 'policy_kwargs': {name} must be a list of at most "
-                         f"{NET_DEPTH_MAX} hidden-layer widths, each an integer in [1, "
-                         f"{NET_WIDTH_MAX}], got {v!r}")
+        raise ValueError(
+            f"hyper-parameter 'policy_kwargs': {name} must be a list of at most "
+            f"{NET_DEPTH_MAX} hidden-layer widths, each an integer in [1, "
+            f"{NET_WIDTH_MAX}], got {v!r}"
+        )
     return list(v)
 
 
-def check_policy_kwargs(algo: str, pk: dict) -> dict:
+def check_policy_kwargs(algo: str, pk: dict) -> dict:  # noqa: C901 (one check per policy keyword)
     """The values of ``policy_kwargs`` for the algorithm's MlpPolicy (keys are checked by
     ``check_hyperparams``): ``net_arch`` a list of hidden-layer widths (``_layers``) or a dict
     of them with keys pi and vf (PPO) or pi and qf (SAC, TD3); ``activation_fn`` one of
@@ -437,6 +539,7 @@ def check_policy_kwargs(algo: str, pk: dict) -> dict:
     from stable_baselines3.sac.policies import LOG_STD_MAX, LOG_STD_MIN
 
     from rolling_env.validation import check_int, check_range
+
     heads = ("pi", "vf") if algo == "ppo" else ("pi", "qf")
     out = dict(pk)
     for k, v in pk.items():
@@ -445,37 +548,51 @@ def check_policy_kwargs(algo: str, pk: dict) -> dict:
             if isinstance(v, dict):
                 bad = sorted(set(v) - set(heads), key=str)
                 if bad:
-                    raise ValueError(f"{name} as a dict takes the keys {' and '.join(heads)} "
-                                     f"(for {algo.upper()}), got {bad}")
+                    raise ValueError(
+                        f"{name} as a dict takes the keys {' and '.join(heads)} "
+                        f"(for {algo.upper()}), got {bad}"
+                    )
                 out[k] = {h: _layers(f"net_arch[{h!r}]", x) for h, x in v.items()}
             elif v is not None:
                 out[k] = _layers("net_arch", v)
         elif k == "activation_fn":
             allowed = activation_classes()
             if not (isinstance(v, type) and allowed.get(v.__name__) is v):
-                raise ValueError(f"{name} must be a torch.nn activation class ("
-                                 f"{', '.join('nn.' + n for n in sorted(allowed))}), got "
-                                 f"{getattr(v, '__name__', v)!r}")
+                raise ValueError(
+                    f"{name} must be a torch.nn activation class ("
+                    f"{', '.join('nn.' + n for n in sorted(allowed))}), got "
+                    f"{getattr(v, '__name__', v)!r}"
+                )
         elif k == "log_std_init":
             out[k] = check_range(name, v, LOG_STD_MIN, LOG_STD_MAX)
         elif k == "clip_mean":
             out[k] = check_range(name, v, 0.0, 100.0, lo_open=True)
         elif k == "n_critics":
             out[k] = check_int(name, v, 1, N_CRITICS_MAX)
-        elif k in ("ortho_init", "full_std", "use_expln", "squash_output",
-                   "share_features_extractor", "normalize_images"):
+        elif k in (
+            "ortho_init",
+            "full_std",
+            "use_expln",
+            "squash_output",
+            "share_features_extractor",
+            "normalize_images",
+        ):
             if not isinstance(v, bool):
                 raise ValueError(f"{name} must be true or false, got {v!r}")
         elif k == "optimizer_class":
             if not (isinstance(v, type) and issubclass(v, torch.optim.Optimizer)):
-                raise ValueError(f"{name} must be a torch.optim optimizer class such as "
-                                 f"th.optim.Adam, got {getattr(v, '__name__', v)!r}")
+                raise ValueError(
+                    f"{name} must be a torch.optim optimizer class such as "
+                    f"th.optim.Adam, got {getattr(v, '__name__', v)!r}"
+                )
         elif k in ("optimizer_kwargs", "features_extractor_kwargs"):
             if v is not None and not (isinstance(v, dict) and all(isinstance(x, str) for x in v)):
                 raise ValueError(f"{name} must be a mapping of keywords, got {v!r}")
         elif k == "features_extractor_class":
-            raise ValueError(f"{name} takes an SB3 features extractor class: not supported in "
-                             "the YAML (the default FlattenExtractor fits the flat observation)")
+            raise ValueError(
+                f"{name} takes an SB3 features extractor class: not supported in "
+                "the YAML (the default FlattenExtractor fits the flat observation)"
+            )
     return out
 
 
@@ -485,6 +602,7 @@ def check_policy(algo: str, kwargs: dict, env) -> None:
     building it (a RuntimeError from torch, a TypeError or ValueError from the optimizer
     keywords, ...) is a one-line ValueError naming policy_kwargs, before any run folder."""
     import inspect
+
     pol = _algo_class(algo).policy_aliases["MlpPolicy"]
     pk = dict(kwargs.get("policy_kwargs") or {})
     if "use_sde" in inspect.signature(pol.__init__).parameters:
@@ -492,8 +610,10 @@ def check_policy(algo: str, kwargs: dict, env) -> None:
     try:
         pol(env.observation_space, env.action_space, lambda _: 1e-3, **pk)
     except Exception as e:  # noqa: BLE001  (whatever SB3 or torch raise: one line, named)
-        raise ValueError(f"hyper-parameter 'policy_kwargs': {pol.__name__} cannot be built "
-                         f"with {kwargs.get('policy_kwargs')!r}: {one_line(e)}") from None
+        raise ValueError(
+            f"hyper-parameter 'policy_kwargs': {pol.__name__} cannot be built "
+            f"with {kwargs.get('policy_kwargs')!r}: {one_line(e)}"
+        ) from None
 
 
 def action_noise(spec, n_actions: int = 3):
@@ -502,13 +622,20 @@ def action_noise(spec, n_actions: int = 3):
         return None
     import numpy as np
     from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
+
     kind, std = spec
     cls = NormalActionNoise if kind == "normal" else OrnsteinUhlenbeckActionNoise
     return cls(np.zeros(n_actions), std * np.ones(n_actions))
 
 
-def make_vec_env(scene, n_envs: int, seed: int, env_kwargs: dict | None = None,
-                 kind: str = "batched", num_threads=None):
+def make_vec_env(
+    scene,
+    n_envs: int,
+    seed: int,
+    env_kwargs: dict | None = None,
+    kind: str = "batched",
+    num_threads=None,
+):
     """The training vector env, wrapped in ``VecMonitor``.  ``kind="batched"``: the natively
     batched ``rolling_env.sb3_vec.RollingDriveVecEnv`` (one compiled call steps all envs;
     ``num_threads`` as there: None picks the serial or threaded kernel step by step from
@@ -523,9 +650,11 @@ def make_vec_env(scene, n_envs: int, seed: int, env_kwargs: dict | None = None,
     kw.pop("scene", None)
     if kind == "batched":
         from rolling_env.sb3_vec import RollingDriveVecEnv
+
         venv = RollingDriveVecEnv(n_envs, scene=scene, num_threads=num_threads, **kw)
     elif kind == "dummy":
         import rolling_env
+
         envs = [rolling_env.make(scene, **kw) for _ in range(n_envs)]
         venv = DummyVecEnv([lambda e=e: e for e in envs])
     else:
@@ -575,9 +704,9 @@ def scene_fields(scene) -> dict:
     import dataclasses
 
     from rolling_env.scenes import Scene, load_scene
+
     sc = scene if isinstance(scene, Scene) else load_scene(scene)
-    fields = {k: v for k, v in dataclasses.asdict(sc).items()
-              if k not in ("name", "description")}
+    fields = {k: v for k, v in dataclasses.asdict(sc).items() if k not in ("name", "description")}
     fields["randomize"] = [list(t) for t in sc.randomize]  # as YAML and JSON read it back
     fields["n_sub"] = int(sc.n_sub)
     return fields
@@ -587,6 +716,7 @@ def fields_digest(fields: dict) -> str:
     """SHA-256 (hex) of a ``scene_fields`` mapping (keys sorted, floats as repr: exact)."""
     import hashlib
     import json
+
     return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()
 
 
@@ -603,10 +733,14 @@ def completed_fields(fields: dict) -> dict:
     import dataclasses
 
     from rolling_env.scenes import Scene
+
     out = dict(fields)
     for f in dataclasses.fields(Scene):
-        if f.name not in out and f.name not in ("name", "description") \
-                and f.default is not dataclasses.MISSING:
+        if (
+            f.name not in out
+            and f.name not in ("name", "description")
+            and f.default is not dataclasses.MISSING
+        ):
             v = BEFORE_KEY.get(f.name, f.default)
             out[f.name] = list(v) if isinstance(v, tuple) else v
     sub = out.get("sub_steps")
@@ -629,10 +763,11 @@ def numerics_note(trained: dict, now: dict) -> str:
         parts.append(f"sub_steps {_sub_steps_text(trained)} (now {_sub_steps_text(now)})")
     for k in ("resolution", "accuracy", "grid_levels") + REWARD_KEYS:
         if trained.get(k) != now.get(k):
-            parts.append(f"{k} {trained.get(k, '-'):g} (now {now.get(k, '-'):g})"
-                         if isinstance(trained.get(k), (int, float))
-                         and isinstance(now.get(k), (int, float))
-                         else f"{k} {trained.get(k, '-')!r} (now {now.get(k, '-')!r})")
+            parts.append(
+                f"{k} {trained.get(k, '-'):g} (now {now.get(k, '-'):g})"
+                if isinstance(trained.get(k), (int, float)) and isinstance(now.get(k), (int, float))
+                else f"{k} {trained.get(k, '-')!r} (now {now.get(k, '-')!r})"
+            )
     return ", ".join(parts)
 
 
@@ -643,6 +778,7 @@ def scene_key(scene) -> str:
     scene_digest>`` (a custom default.yaml with mu 0.01 is not ``default``).  A file that
     cannot be read keeps its stem (loading it reports the error)."""
     import rolling_env.scenes as scenes
+
     p = Path(scene)
     if p.suffix.lower() not in (".yaml", ".yml"):
         return str(scene)
@@ -673,6 +809,7 @@ def buildable_scene(scene):
 
     from rolling_env.env import build_drive
     from rolling_env.scenes import load_scene
+
     sc = load_scene(scene)
     name = str(scene) if isinstance(scene, (str, os.PathLike)) else sc.name
     try:
@@ -681,8 +818,10 @@ def buildable_scene(scene):
         m = re.search(r"would need (\d+) cells", str(e))
         if m is None:
             raise ValueError(f"scene {name!r} cannot be built: {e}") from None
-        raise ValueError(f"scene {name!r}: scene keys 'resolution' = {sc.resolution:g} (cells "
-                         f"per contact radius) and 'stroke_roll' = {sc.stroke_roll:g} m need "
-                         f"{m.group(1)} spring cells (at most 2e7): lower resolution or "
-                         "stroke_roll") from None
+        raise ValueError(
+            f"scene {name!r}: scene keys 'resolution' = {sc.resolution:g} (cells "
+            f"per contact radius) and 'stroke_roll' = {sc.stroke_roll:g} m need "
+            f"{m.group(1)} spring cells (at most 2e7): lower resolution or "
+            "stroke_roll"
+        ) from None
     return sc

@@ -12,6 +12,7 @@ hyper-parameter entry has ``residual: <base>`` or with ``--residual <base>``); e
 does so from the run's config.yml).  The baseline is built from the scene the run was trained
 on, so on a held-out variant of a scene the baseline part knows what the agent knows.
 """
+
 from __future__ import annotations
 
 import copy
@@ -47,13 +48,15 @@ def combine(base_action, policy_action, scale: float) -> np.ndarray:
 
 def augment(obs, base_action) -> np.ndarray:
     """The policy's observation: the env's followed by the baseline's action."""
-    return np.concatenate([np.asarray(obs, dtype=np.float32),
-                           np.asarray(base_action, dtype=np.float32)], axis=-1)
+    return np.concatenate(
+        [np.asarray(obs, dtype=np.float32), np.asarray(base_action, dtype=np.float32)], axis=-1
+    )
 
 
 def augmented_space(space):
     """The observation space of ``augment``ed observations."""
     from gymnasium import spaces
+
     low = np.concatenate([space.low, -np.ones(N_BASE, np.float32)]).astype(np.float32)
     high = np.concatenate([space.high, np.ones(N_BASE, np.float32)]).astype(np.float32)
     return spaces.Box(low, high, dtype=np.float32)
@@ -74,7 +77,8 @@ class ResidualVecEnv(VecEnvWrapper):
     def reset(self):
         obs = self.venv.reset()
         self._base_action, _ = self.controller.predict(
-            obs, episode_start=np.ones(self.num_envs, bool))
+            obs, episode_start=np.ones(self.num_envs, bool)
+        )
         return augment(obs, self._base_action)
 
     def step_async(self, actions):
@@ -108,7 +112,7 @@ class ResidualAgent:
     def predict(self, obs, state=None, episode_start=None, deterministic=True):
         obs = np.asarray(obs, dtype=np.float32)
         b, _ = self.controller.predict(obs, episode_start=episode_start)
-        r, state = self.policy.predict(augment(obs, b), state=state,
-                                       episode_start=episode_start,
-                                       deterministic=deterministic)
+        r, state = self.policy.predict(
+            augment(obs, b), state=state, episode_start=episode_start, deterministic=deterministic
+        )
         return combine(b, r, self.scale), state

@@ -9,13 +9,15 @@ targets (rliable's runs x tasks).  Reported per configuration:
   target; a configuration with one run, a baseline, has a zero-width interval: its spread
   over targets is in the tables of means);
 * the probability of improvement over the better baseline (the one with the lower mean
-  final error, as in the goal table): the chance that a run of the configuration ends closer to the target than
+  final error, as in the goal table): the chance that a run of the configuration ends closer to
+  the target than
   the baseline on the same target, averaged over targets, with its interval;
 * the seeds that meet the goal (``evaluate.goal_verdicts``), and whether the configuration
   holds the goal over seeds: at least 4 of 5 seeds meet it (80% of the runs where there are
   other counts) and the upper end of the IQM interval lies below half the better baseline's
   IQM.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -32,6 +34,7 @@ def _groups(rows: list[dict]) -> dict:
     (only where every run of the name has the same configuration, model file and budget,
     as ``evaluate.seed_summary`` requires), a run without a seed suffix alone."""
     from .evaluate import _SEED_SUFFIX, BASELINES
+
     groups: dict = {}
     for r in rows:
         m = _SEED_SUFFIX.match(r["controller"])
@@ -39,8 +42,7 @@ def _groups(rows: list[dict]) -> dict:
         groups.setdefault((r["scene"], name), []).append(r)
     out = {}
     for key, rs in groups.items():
-        kinds = {(r.get("config_key"), r.get("model_file"), r.get("train_env_steps"))
-                 for r in rs}
+        kinds = {(r.get("config_key"), r.get("model_file"), r.get("train_env_steps")) for r in rs}
         if len(kinds) == 1:
             out[key] = rs
         else:  # not one configuration: each run stands alone
@@ -57,8 +59,9 @@ def _matrix(rs: list[dict], key: str, scale: float = 1.0) -> np.ndarray:
     return np.array([np.asarray(r[key], float) / scale for r in rs])
 
 
-def seed_statistics(rows: list[dict], reps: int = REPS, seed: int = SEED,
-                    reps_poi: int = REPS_POI) -> list[dict]:
+def seed_statistics(
+    rows: list[dict], reps: int = REPS, seed: int = SEED, reps_poi: int = REPS_POI
+) -> list[dict]:
     """One dict per scene and configuration (see the module): rows from
     ``evaluate.evaluate_scene`` (with their per-episode lists)."""
     import warnings
@@ -67,6 +70,7 @@ def seed_statistics(rows: list[dict], reps: int = REPS, seed: int = SEED,
     from rliable import metrics
 
     from .evaluate import BASELINES, goal_verdicts
+
     def intervals(scores, func, n):
         # rliable's stratified bootstraps draw from numpy's global generator: seeded here
         # for tables that regenerate exactly, and the caller's state put back after
@@ -74,10 +78,12 @@ def seed_statistics(rows: list[dict], reps: int = REPS, seed: int = SEED,
         np.random.seed(seed)
         try:
             with warnings.catch_warnings():  # rliable hands arch a RandomState, which
-                warnings.filterwarnings("ignore", message="random_state is deprecated",
-                                        category=FutureWarning)  # arch will stop taking
-                return rly.get_interval_estimates(scores, func, reps=n,
-                                                  confidence_interval_size=CONFIDENCE)
+                warnings.filterwarnings(
+                    "ignore", message="random_state is deprecated", category=FutureWarning
+                )  # arch will stop taking
+                return rly.get_interval_estimates(
+                    scores, func, reps=n, confidence_interval_size=CONFIDENCE
+                )
         finally:
             np.random.set_state(saved)
 
@@ -99,8 +105,11 @@ def seed_statistics(rows: list[dict], reps: int = REPS, seed: int = SEED,
         bases = [b for b in BASELINES if b in err]
         # the better baseline as the goal tables choose it: the lower mean final error
         best = min(bases, key=lambda b: float(err[b].mean())) if bases else None
-        pairs = {name: (-err[name], -err[best]) for name in err
-                 if best is not None and name not in BASELINES}
+        pairs = {
+            name: (-err[name], -err[best])
+            for name in err
+            if best is not None and name not in BASELINES
+        }
         if pairs:
             pt_p, ci_p = intervals(pairs, metrics.probability_of_improvement, reps_poi)
         for k in keys:
@@ -108,24 +117,34 @@ def seed_statistics(rows: list[dict], reps: int = REPS, seed: int = SEED,
             rs = groups[k]
             lo, hi = np.asarray(ci_e[name]).reshape(2)
             s_lo, s_hi = np.asarray(ci_s[name]).reshape(2)
-            row = {"scene": scene, "config": name, "runs": len(rs),
-                   "episodes": err[name].shape[1], "baseline": best,
-                   "iqm_error": iqm[name], "iqm_error_lo": float(lo),
-                   "iqm_error_hi": float(hi),
-                   "iqm_slip": float(np.asarray(pt_s[name]).reshape(-1)[0]),
-                   "iqm_slip_lo": float(s_lo), "iqm_slip_hi": float(s_hi),
-                   "controllers": [r["controller"] for r in rs],
-                   "trained_numerics": sorted({r.get("trained_numerics") or "" for r in rs})}
+            row = {
+                "scene": scene,
+                "config": name,
+                "runs": len(rs),
+                "episodes": err[name].shape[1],
+                "baseline": best,
+                "iqm_error": iqm[name],
+                "iqm_error_lo": float(lo),
+                "iqm_error_hi": float(hi),
+                "iqm_slip": float(np.asarray(pt_s[name]).reshape(-1)[0]),
+                "iqm_slip_lo": float(s_lo),
+                "iqm_slip_hi": float(s_hi),
+                "controllers": [r["controller"] for r in rs],
+                "trained_numerics": sorted({r.get("trained_numerics") or "" for r in rs}),
+            }
             if name in pairs:
                 p_lo, p_hi = np.asarray(ci_p[name]).reshape(2)
-                met = [verdicts[(scene, c)] for c in row["controllers"]
-                       if (scene, c) in verdicts]
+                met = [verdicts[(scene, c)] for c in row["controllers"] if (scene, c) in verdicts]
                 ratio_hi = row["iqm_error_hi"] / iqm[best] if iqm[best] > 0 else np.inf
-                row.update(poi=float(np.asarray(pt_p[name]).reshape(-1)[0]),
-                           poi_lo=float(p_lo), poi_hi=float(p_hi), met=sum(met),
-                           judged=len(met), iqm_ratio_hi=float(ratio_hi),
-                           holds=bool(met and sum(met) >= MIN_SHARE * len(met)
-                                      and ratio_hi < 0.5))
+                row.update(
+                    poi=float(np.asarray(pt_p[name]).reshape(-1)[0]),
+                    poi_lo=float(p_lo),
+                    poi_hi=float(p_hi),
+                    met=sum(met),
+                    judged=len(met),
+                    iqm_ratio_hi=float(ratio_hi),
+                    holds=bool(met and sum(met) >= MIN_SHARE * len(met) and ratio_hi < 0.5),
+                )
             out.append(row)
     return out
 
@@ -133,29 +152,39 @@ def seed_statistics(rows: list[dict], reps: int = REPS, seed: int = SEED,
 def markdown(stats: list[dict], marks: dict | None = None) -> list[str]:
     """The statistics section of comparison.md."""
     from .evaluate import _marked
+
     marks = marks or {}
-    lines = ["## Over seeds and targets (rliable)", "",
-             f"Interquartile mean (IQM) over runs x held-out targets with {CONFIDENCE:.0%} "
-             f"stratified bootstrap intervals ({REPS} resamples, {REPS_POI} for "
-             f"P(improvement); seed {SEED}); a baseline is one run, so its interval has "
-             "zero width.  *P(improvement)*: the probability that a run of the "
-             "configuration ends closer to the target than the better baseline (lower mean "
-             "final error) on the same target, averaged over the targets.  *Holds*: "
-             f"at least {MIN_SHARE:.0%} of the seeds meet the goal above and the upper end "
-             "of the IQM interval lies below half the better baseline's IQM.", "",
-             "| scene | configuration | runs | IQM final error / tol [95% CI] | IQM slip work "
-             "[nJ] [95% CI] | P(improvement) over | seeds meeting the goal | holds |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "## Over seeds and targets (rliable)",
+        "",
+        f"Interquartile mean (IQM) over runs x held-out targets with {CONFIDENCE:.0%} "
+        f"stratified bootstrap intervals ({REPS} resamples, {REPS_POI} for "
+        f"P(improvement); seed {SEED}); a baseline is one run, so its interval has "
+        "zero width.  *P(improvement)*: the probability that a run of the "
+        "configuration ends closer to the target than the better baseline (lower mean "
+        "final error) on the same target, averaged over the targets.  *Holds*: "
+        f"at least {MIN_SHARE:.0%} of the seeds meet the goal above and the upper end "
+        "of the IQM interval lies below half the better baseline's IQM.",
+        "",
+        "| scene | configuration | runs | IQM final error / tol [95% CI] | IQM slip work "
+        "[nJ] [95% CI] | P(improvement) over | seeds meeting the goal | holds |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for s in stats:
         name = _marked(s["config"], s["trained_numerics"], marks)
-        poi = (f"{s['poi']:.2f} [{s['poi_lo']:.2f}, {s['poi_hi']:.2f}] {s['baseline']}"
-               if "poi" in s else "-")
+        poi = (
+            f"{s['poi']:.2f} [{s['poi_lo']:.2f}, {s['poi_hi']:.2f}] {s['baseline']}"
+            if "poi" in s
+            else "-"
+        )
         goal = f"{s['met']} of {s['judged']}" if "met" in s else "-"
         holds = ("yes" if s["holds"] else "no") if "holds" in s else "-"
-        lines.append(f"| {s['scene']} | {name} | {s['runs']} | {s['iqm_error']:.3g} "
-                     f"[{s['iqm_error_lo']:.3g}, {s['iqm_error_hi']:.3g}] | "
-                     f"{s['iqm_slip']:.3g} [{s['iqm_slip_lo']:.3g}, {s['iqm_slip_hi']:.3g}] | "
-                     f"{poi} | {goal} | {holds} |")
+        lines.append(
+            f"| {s['scene']} | {name} | {s['runs']} | {s['iqm_error']:.3g} "
+            f"[{s['iqm_error_lo']:.3g}, {s['iqm_error_hi']:.3g}] | "
+            f"{s['iqm_slip']:.3g} [{s['iqm_slip_lo']:.3g}, {s['iqm_slip_hi']:.3g}] | "
+            f"{poi} | {goal} | {holds} |"
+        )
     return lines
 
 
@@ -166,6 +195,7 @@ def plot_intervals(stats: list[dict], path) -> None:
     from matplotlib.figure import Figure
 
     from .common import atomic_write
+
     scenes = list(dict.fromkeys(s["scene"] for s in stats))
     fig = Figure(figsize=(7, 1.2 + 0.45 * len(stats)))  # no pyplot: no global state touched
     FigureCanvasAgg(fig)
@@ -175,8 +205,7 @@ def plot_intervals(stats: list[dict], path) -> None:
         y = np.arange(len(ss))[::-1]
         for yi, s in zip(y, ss):
             lo, hi = max(s["iqm_error_lo"], 1e-3), max(s["iqm_error_hi"], 1e-3)
-            ax.plot([lo, hi], [yi, yi], lw=6, alpha=0.5,
-                    color="C0" if "poi" in s else "0.5")
+            ax.plot([lo, hi], [yi, yi], lw=6, alpha=0.5, color="C0" if "poi" in s else "0.5")
             ax.plot([max(s["iqm_error"], 1e-3)], [yi], "k|", ms=12)
         ref = next((s for s in ss if s["config"] == ss[0].get("baseline")), None)
         if ref is not None:

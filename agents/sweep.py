@@ -31,6 +31,7 @@ replaced), and failed ones are tried again.  A trial that fails is retried up to
 ``max_failures`` times (default 1) while the others go on; a sweep with failed trials exits 1.
 A bad sweep file is one line naming the key, exit 2, before Ray starts.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -51,14 +52,33 @@ from .common import ALGOS, atomic_write, check_hyperparams, load_hyperparams, sc
 
 PROG = "python -m agents.sweep"
 # keys of a sweep file, with their defaults (None: none, or computed)
-COMMON_KEYS = {"kind": None, "name": None, "storage": None, "n_timesteps": None,
-               "n_envs": None, "eval_freq": 10000, "eval_episodes": 5,
-               "checkpoint_freq": 50000, "cpus_per_trial": 1, "max_concurrent": 0,
-               "max_failures": 1}
+COMMON_KEYS = {
+    "kind": None,
+    "name": None,
+    "storage": None,
+    "n_timesteps": None,
+    "n_envs": None,
+    "eval_freq": 10000,
+    "eval_episodes": 5,
+    "checkpoint_freq": 50000,
+    "cpus_per_trial": 1,
+    "max_concurrent": 0,
+    "max_failures": 1,
+}
 GRID_KEYS = dict(COMMON_KEYS, scenes=None, algos=[], configs={}, seeds=None, runs="runs")
-SEARCH_KEYS = dict(COMMON_KEYS, scene=None, algo=None, conf=None, seed=0, trials=None,
-                   space=None, grace_period=None, reduction_factor=3, search_seed=0,
-                   output=None)
+SEARCH_KEYS = dict(
+    COMMON_KEYS,
+    scene=None,
+    algo=None,
+    conf=None,
+    seed=0,
+    trials=None,
+    space=None,
+    grace_period=None,
+    reduction_factor=3,
+    search_seed=0,
+    output=None,
+)
 SPACE_KINDS = ("uniform", "loguniform", "int", "logint", "choice")
 #: thread settings of every trial's process: one numba and one BLAS/OpenMP thread per trial
 #: (a trial asks Ray for cpus_per_trial CPUs; more threads would oversubscribe the cores)
@@ -101,8 +121,9 @@ def _str(key, v):
 
 def _name(key, v):
     if not isinstance(v, str) or not NAME.match(v):
-        raise SweepError(f"key {key!r} must be a name of letters, digits, '_', '.' or '-', "
-                         f"got {v!r}")
+        raise SweepError(
+            f"key {key!r} must be a name of letters, digits, '_', '.' or '-', got {v!r}"
+        )
     return v
 
 
@@ -122,6 +143,7 @@ def _path(v) -> str:
 
 def _scene(key, s):
     from .common import buildable_scene
+
     s = _str(key, s)
     if Path(s).suffix.lower() in (".yaml", ".yml"):
         s = _path(s)
@@ -140,14 +162,17 @@ def _entry(key, algo, scene, conf, n_timesteps, extra=None):
     except ValueError as e:
         raise SweepError(f"key {key!r}: {e}") from None
     if n_timesteps is None and checked["n_timesteps"] is None:
-        raise SweepError(f"key {key!r}: the hyper-parameters of {algo} for scene "
-                         f"{scene_key(scene)!r} have no n_timesteps: give key 'n_timesteps'")
+        raise SweepError(
+            f"key {key!r}: the hyper-parameters of {algo} for scene "
+            f"{scene_key(scene)!r} have no n_timesteps: give key 'n_timesteps'"
+        )
     return hp
 
 
 def _common(raw: dict, out: dict) -> None:
-    out["n_timesteps"] = (None if raw.get("n_timesteps") is None
-                          else _int("n_timesteps", raw["n_timesteps"], 1))
+    out["n_timesteps"] = (
+        None if raw.get("n_timesteps") is None else _int("n_timesteps", raw["n_timesteps"], 1)
+    )
     out["n_envs"] = None if raw.get("n_envs") is None else _int("n_envs", raw["n_envs"], 1, 4096)
     for k in ("eval_freq", "eval_episodes", "checkpoint_freq"):
         out[k] = _int(k, raw[k], 1)
@@ -159,8 +184,9 @@ def _common(raw: dict, out: dict) -> None:
     out["max_failures"] = _int("max_failures", raw["max_failures"], 0, 100)
 
 
-def _grid(raw: dict, out: dict) -> None:
+def _grid(raw: dict, out: dict) -> None:  # noqa: C901 (one check per key of a grid file)
     from .train import SEED_MAX
+
     scenes = _list("scenes", raw["scenes"])
     if not scenes:
         raise SweepError("key 'scenes' is empty or missing: the grid has no trials")
@@ -169,8 +195,10 @@ def _grid(raw: dict, out: dict) -> None:
         s = _scene("scenes", s)
         k = scene_key(s)
         if k in keys:
-            raise SweepError(f"key 'scenes': {keys[k]!r} and {s!r} have the same scene key "
-                             f"{k!r} (their run folders would collide)")
+            raise SweepError(
+                f"key 'scenes': {keys[k]!r} and {s!r} have the same scene key "
+                f"{k!r} (their run folders would collide)"
+            )
         keys[k] = s
         out["scenes"].append(s)
     agents = {}
@@ -182,29 +210,36 @@ def _grid(raw: dict, out: dict) -> None:
         agents[a] = {"algo": a, "conf": None}
     configs = raw["configs"] if raw["configs"] is not None else {}
     if not isinstance(configs, dict):
-        raise SweepError(f"key 'configs' must be a mapping of name: {{algo, conf}}, got "
-                         f"{configs!r}")
+        raise SweepError(
+            f"key 'configs' must be a mapping of name: {{algo, conf}}, got {configs!r}"
+        )
     for name, c in configs.items():
         key = f"configs.{name}"
         _name("configs", name)
         if name in agents:
-            raise SweepError(f"key {key!r}: the name is also in 'algos' (run folders "
-                             f"{name}_seed<N> would collide)")
+            raise SweepError(
+                f"key {key!r}: the name is also in 'algos' (run folders "
+                f"{name}_seed<N> would collide)"
+            )
         if not isinstance(c, dict) or "algo" not in c:
             raise SweepError(f"key {key!r} must be a mapping with 'algo' and 'conf', got {c!r}")
         bad = sorted(set(c) - {"algo", "conf"})
         if bad:
-            raise SweepError(f"key '{key}.{bad[0]}' unknown (a configuration has 'algo' and "
-                             "'conf')")
+            raise SweepError(
+                f"key '{key}.{bad[0]}' unknown (a configuration has 'algo' and 'conf')"
+            )
         if c["algo"] not in ALGOS:
-            raise SweepError(f"key '{key}.algo': unknown algorithm {c['algo']!r} (one of "
-                             f"{list(ALGOS)})")
-        agents[name] = {"algo": c["algo"],
-                        "conf": None if c.get("conf") is None else
-                        _path(_str(f"{key}.conf", c["conf"]))}
+            raise SweepError(
+                f"key '{key}.algo': unknown algorithm {c['algo']!r} (one of {list(ALGOS)})"
+            )
+        agents[name] = {
+            "algo": c["algo"],
+            "conf": None if c.get("conf") is None else _path(_str(f"{key}.conf", c["conf"])),
+        }
     if not agents:
-        raise SweepError("keys 'algos' and 'configs' are both empty or missing: the grid has "
-                         "no trials")
+        raise SweepError(
+            "keys 'algos' and 'configs' are both empty or missing: the grid has no trials"
+        )
     out["agents"] = agents
     seeds = _list("seeds", raw["seeds"])
     if not seeds:
@@ -214,38 +249,54 @@ def _grid(raw: dict, out: dict) -> None:
         raise SweepError(f"key 'seeds': a seed is given twice in {out['seeds']}")
     for name, a in agents.items():  # every entry checked, as agents.train checks it
         for s in out["scenes"]:
-            _entry("configs." + name if name in configs else "algos", a["algo"], s, a["conf"],
-                   out["n_timesteps"])
+            _entry(
+                "configs." + name if name in configs else "algos",
+                a["algo"],
+                s,
+                a["conf"],
+                out["n_timesteps"],
+            )
     out["runs"] = _path(_str("runs", raw["runs"]))
-    out["storage"] = _path(raw["storage"] if raw.get("storage") is not None
-                           else Path(out["runs"]) / ".sweeps")
+    out["storage"] = _path(
+        raw["storage"] if raw.get("storage") is not None else Path(out["runs"]) / ".sweeps"
+    )
 
 
 def _space(key: str, spec) -> tuple:
     """One dimension of the search space: ({kind: args}) -> (kind, args), checked."""
     if not isinstance(spec, dict) or len(spec) != 1 or next(iter(spec)) not in SPACE_KINDS:
-        raise SweepError(f"key {key!r} must be one of {{{', '.join(SPACE_KINDS)}: ...}}, got "
-                         f"{spec!r}")
+        raise SweepError(
+            f"key {key!r} must be one of {{{', '.join(SPACE_KINDS)}: ...}}, got {spec!r}"
+        )
     kind, args = next(iter(spec.items()))
     if kind == "choice":  # Optuna's categorical values are scalars
-        if (not isinstance(args, list) or not args
-                or not all(a is None or isinstance(a, (str, int, float)) for a in args)):
-            raise SweepError(f"key {key!r}: choice needs a non-empty list of numbers, strings "
-                             f"or booleans, got {args!r}")
+        if (
+            not isinstance(args, list)
+            or not args
+            or not all(a is None or isinstance(a, (str, int, float)) for a in args)
+        ):
+            raise SweepError(
+                f"key {key!r}: choice needs a non-empty list of numbers, strings "
+                f"or booleans, got {args!r}"
+            )
         return kind, args
     if not isinstance(args, list) or len(args) != 2:
         raise SweepError(f"key {key!r}: {kind} needs [low, high], got {args!r}")
-    lo, hi = (_int(key, a, -10**12) if kind in ("int", "logint") else _number(key, a)
-              for a in args)
+    lo, hi = (
+        _int(key, a, -(10**12)) if kind in ("int", "logint") else _number(key, a) for a in args
+    )
     if not lo < hi or (kind.startswith("log") and lo <= 0):
-        raise SweepError(f"key {key!r}: {kind} needs low < high"
-                         + (" and low > 0" if kind.startswith("log") else "")
-                         + f", got {args!r}")
+        raise SweepError(
+            f"key {key!r}: {kind} needs low < high"
+            + (" and low > 0" if kind.startswith("log") else "")
+            + f", got {args!r}"
+        )
     return kind, [lo, hi]
 
 
 def _search(raw: dict, out: dict) -> None:
     from .train import SEED_MAX
+
     if raw["scene"] is None:
         raise SweepError("key 'scene' is missing: a search runs on one scene")
     out["scene"] = _scene("scene", raw["scene"])
@@ -260,29 +311,41 @@ def _search(raw: dict, out: dict) -> None:
     if out["n_timesteps"] is None:
         raise SweepError("key 'n_timesteps' is missing: the budget of each trial")
     if out["eval_freq"] > out["n_timesteps"]:
-        raise SweepError(f"key 'eval_freq' ({out['eval_freq']}) is larger than n_timesteps "
-                         f"({out['n_timesteps']}): the search needs evaluations")
+        raise SweepError(
+            f"key 'eval_freq' ({out['eval_freq']}) is larger than n_timesteps "
+            f"({out['n_timesteps']}): the search needs evaluations"
+        )
     space = raw["space"]
     if not isinstance(space, dict) or not space:
-        raise SweepError(f"key 'space' must be a non-empty mapping of hyper-parameter: "
-                         f"{{{', '.join(SPACE_KINDS)}: ...}}, got {space!r}")
+        raise SweepError(
+            f"key 'space' must be a non-empty mapping of hyper-parameter: "
+            f"{{{', '.join(SPACE_KINDS)}: ...}}, got {space!r}"
+        )
     base = _entry("conf", out["algo"], out["scene"], out["conf"], out["n_timesteps"])
     out["space"] = {}
     for k, spec in space.items():
         key = f"space.{k}"
         if k in ("n_timesteps", "env_kwargs") or (k == "n_envs" and out["n_envs"]):
-            raise SweepError(f"key {key!r} cannot be searched (" + {
-                "n_timesteps": "the budget is key 'n_timesteps'",
-                "env_kwargs": "scene overrides would change the scene",
-                "n_envs": "key 'n_envs' fixes it for every trial"}[k] + ")")
+            raise SweepError(
+                f"key {key!r} cannot be searched ("
+                + {
+                    "n_timesteps": "the budget is key 'n_timesteps'",
+                    "env_kwargs": "scene overrides would change the scene",
+                    "n_envs": "key 'n_envs' fixes it for every trial",
+                }[k]
+                + ")"
+            )
         kind, args = _space(key, spec)
         for v in args:  # the ends of a range and every choice must pass the entry's check
             _entry(key, out["algo"], out["scene"], out["conf"], out["n_timesteps"], {k: v})
         out["space"][str(k)] = {kind: args}
     out["base"] = base
     gp = raw["grace_period"]
-    out["grace_period"] = (max(out["eval_freq"], out["n_timesteps"] // 4) if gp is None
-                           else _int("grace_period", gp, 1, out["n_timesteps"]))
+    out["grace_period"] = (
+        max(out["eval_freq"], out["n_timesteps"] // 4)
+        if gp is None
+        else _int("grace_period", gp, 1, out["n_timesteps"])
+    )
     out["reduction_factor"] = _int("reduction_factor", raw["reduction_factor"], 2, 100)
     out["search_seed"] = _int("search_seed", raw["search_seed"], 0, 2**32 - 1)
     if raw["output"] is None:
@@ -292,14 +355,16 @@ def _search(raw: dict, out: dict) -> None:
         raise SweepError(f"key 'output' must name a .yml file, got {raw['output']!r}")
     if Path(out["output"]).exists():  # its other entries are kept: it must be readable
         from rolling_env.scenes import read_yaml
+
         try:
             table = read_yaml(out["output"], "hyper-parameter file")
         except ValueError as e:
             raise SweepError(f"key 'output': {e}") from None
         if table is not None and not isinstance(table, dict):
             raise SweepError(f"key 'output': {raw['output']!r} holds no mapping of entries")
-    out["storage"] = _path(raw["storage"] if raw.get("storage") is not None
-                           else Path("runs") / ".sweeps")
+    out["storage"] = _path(
+        raw["storage"] if raw.get("storage") is not None else Path("runs") / ".sweeps"
+    )
 
 
 def load_sweep(path) -> dict:
@@ -308,24 +373,29 @@ def load_sweep(path) -> dict:
     accepted as agents.train would accept it, the grid not empty.  A SweepError naming the
     key otherwise.  Paths come back absolute."""
     from rolling_env.scenes import read_yaml
+
     try:
         raw = read_yaml(path, "sweep file")
     except ValueError as e:
         raise SweepError(str(e)) from None
     if not isinstance(raw, dict):
-        raise SweepError(f"sweep file {str(path)!r} must hold a mapping of keys, got "
-                         f"{type(raw).__name__}")
+        raise SweepError(
+            f"sweep file {str(path)!r} must hold a mapping of keys, got {type(raw).__name__}"
+        )
     kind = raw.get("kind")
     if kind not in ("grid", "search"):
         raise SweepError(f"key 'kind' must be 'grid' or 'search', got {kind!r}")
     known = GRID_KEYS if kind == "grid" else SEARCH_KEYS
     unknown = [k for k in raw if k not in known]
     if unknown:
-        raise SweepError(f"key {unknown[0]!r} is unknown for a {kind} sweep (keys: "
-                         f"{', '.join(known)})")
+        raise SweepError(
+            f"key {unknown[0]!r} is unknown for a {kind} sweep (keys: {', '.join(known)})"
+        )
     raw = {k: raw.get(k, d) for k, d in known.items()}
-    out = {"kind": kind, "name": _name("name", raw["name"] if raw["name"] is not None
-                                       else Path(path).stem)}
+    out = {
+        "kind": kind,
+        "name": _name("name", raw["name"] if raw["name"] is not None else Path(path).stem),
+    }
     _common(raw, out)
     (_grid if kind == "grid" else _search)(raw, out)
     return out
@@ -340,9 +410,17 @@ def grid_trials(sweep: dict) -> list[dict]:
         for name, a in sweep["agents"].items():
             for seed in sweep["seeds"]:
                 run = Path(sweep["runs"]) / key / f"{name}_seed{seed}"
-                out.append({"label": f"{key}/{name}_seed{seed}", "scene": s, "name": name,
-                            "algo": a["algo"], "conf": a["conf"], "seed": seed,
-                            "run_dir": str(run)})
+                out.append(
+                    {
+                        "label": f"{key}/{name}_seed{seed}",
+                        "scene": s,
+                        "name": name,
+                        "algo": a["algo"],
+                        "conf": a["conf"],
+                        "seed": seed,
+                        "run_dir": str(run),
+                    }
+                )
     return out
 
 
@@ -372,26 +450,33 @@ def check_start(sweep: dict, resume: bool) -> None:
     exp = experiment_dir(sweep)
     if resume:
         if not _has_state(exp):
-            raise SweepError(f"--resume: no sweep to resume in {str(exp)!r} (start it without "
-                             "--resume)")
+            raise SweepError(
+                f"--resume: no sweep to resume in {str(exp)!r} (start it without --resume)"
+            )
         saved = exp / SWEEP_FILE
         if saved.is_file():
             before = yaml.safe_load(saved.read_text())
             key = _differs(before, json.loads(json.dumps(sweep)))
             if key:
-                raise SweepError(f"--resume: key {key!r} differs from the sweep started in "
-                                 f"{str(exp)!r}: resume with the file as it was, or start a "
-                                 "new sweep under another name")
+                raise SweepError(
+                    f"--resume: key {key!r} differs from the sweep started in "
+                    f"{str(exp)!r}: resume with the file as it was, or start a "
+                    "new sweep under another name"
+                )
         return
     if _has_state(exp):
-        raise SweepError(f"a sweep named {sweep['name']!r} was already started in {str(exp)!r}:"
-                         " --resume continues it; another 'name' or 'storage' starts a new one")
+        raise SweepError(
+            f"a sweep named {sweep['name']!r} was already started in {str(exp)!r}:"
+            " --resume continues it; another 'name' or 'storage' starts a new one"
+        )
     if sweep["kind"] == "grid":
         for t in grid_trials(sweep):
             run = Path(t["run_dir"])
             if run.is_symlink() or (run.exists() and (not run.is_dir() or any(run.iterdir()))):
-                raise SweepError(f"run folder {t['run_dir']!r} already exists and is not "
-                                 "empty: choose another 'runs' folder, or move it away")
+                raise SweepError(
+                    f"run folder {t['run_dir']!r} already exists and is not "
+                    "empty: choose another 'runs' folder, or move it away"
+                )
 
 
 # ------------------------------------------------------------------ one trial (a Ray worker)
@@ -402,6 +487,7 @@ def _one_thread() -> None:
         os.environ[k] = v
     if "numba" in sys.modules:
         import numba
+
         if numba.config.NUMBA_NUM_THREADS > 1:
             numba.set_num_threads(1)
 
@@ -410,27 +496,38 @@ def run_result(run: Path) -> dict:
     """What a finished run folder says: the last evaluation's mean reward, env steps, wall
     time (meta.json's, the training alone)."""
     import numpy as np
+
     meta = json.loads((run / "meta.json").read_text())
     reward = float("nan")
     if (run / "evaluations.npz").is_file():
         with np.load(run / "evaluations.npz") as ev:
             if len(ev["results"]):
                 reward = float(np.mean(ev["results"][-1]))
-    return {METRIC: reward, TIME_ATTR: int(meta["env_steps"]),
-            "wall_s": float(meta["wall_seconds"]), "finished": True, "run_dir": str(run)}
+    return {
+        METRIC: reward,
+        TIME_ATTR: int(meta["env_steps"]),
+        "wall_s": float(meta["wall_seconds"]),
+        "finished": True,
+        "run_dir": str(run),
+    }
 
 
 def _finished(run: Path, algo: str, seed: int, key: str) -> dict | None:
     """The result of ``run`` where it holds this trial's finished training (a trial that
     finished while the sweep was being stopped, before Tune recorded it), else None."""
     from .common import run_config
+
     try:
         meta = json.loads((run / "meta.json").read_text())
         cfg = run_config(run)
     except (OSError, ValueError):
         return None
-    if (meta.get("interrupted") is not False or not (run / "model.zip").is_file() or not cfg
-            or (cfg.get("algo"), cfg.get("seed"), cfg.get("scene_key")) != (algo, seed, key)):
+    if (
+        meta.get("interrupted") is not False
+        or not (run / "model.zip").is_file()
+        or not cfg
+        or (cfg.get("algo"), cfg.get("seed"), cfg.get("scene_key")) != (algo, seed, key)
+    ):
         return None
     return run_result(run)
 
@@ -439,8 +536,10 @@ def _clear(run: Path) -> None:
     """Remove what an unfinished attempt of this trial left in ``run`` (only a folder that
     agents.train created and that holds nothing but its files)."""
     from .train import _not_a_run
-    if not (run.exists() or run.is_symlink()) or (run.is_dir() and not run.is_symlink()
-                                                    and not any(run.iterdir())):
+
+    if not (run.exists() or run.is_symlink()) or (
+        run.is_dir() and not run.is_symlink() and not any(run.iterdir())
+    ):
         return
     why = _not_a_run(run)
     if why:
@@ -460,32 +559,58 @@ def run_trial(config: dict, spec: dict) -> None:
 
     if spec["kind"] == "grid":
         t = config["trial"]
-        run, algo, scene, seed, conf = (Path(t["run_dir"]), t["algo"], t["scene"], t["seed"],
-                                        t["conf"])
+        run, algo, scene, seed, conf = (
+            Path(t["run_dir"]),
+            t["algo"],
+            t["scene"],
+            t["seed"],
+            t["conf"],
+        )
     else:
         algo, scene, seed = spec["algo"], spec["scene"], spec["seed"]
         trial_id = tune.get_context().get_trial_id()
         run = Path(spec["trials_dir"]) / trial_id
         conf = str(run.with_name(trial_id + ".hyperparams.yml"))
         entry = dict(spec["base"], **_plain(config))
-        atomic_write(conf, lambda p: Path(p).write_text(
-            yaml.safe_dump({scene_key(scene): entry}, sort_keys=False)))
+        atomic_write(
+            conf,
+            lambda p: Path(p).write_text(
+                yaml.safe_dump({scene_key(scene): entry}, sort_keys=False)
+            ),
+        )
     done = _finished(run, algo, seed, scene_key(scene))
     if done is not None:
         tune.report(done)
         return
     _clear(run)
-    argv = ["--algo", algo, "--scene", str(scene), "--seed", str(seed), "--run-dir", str(run),
-            "--eval-freq", str(spec["eval_freq"]), "--eval-episodes", str(spec["eval_episodes"]),
-            "--checkpoint-freq", str(spec["checkpoint_freq"]), "--no-progress"]
+    argv = [
+        "--algo",
+        algo,
+        "--scene",
+        str(scene),
+        "--seed",
+        str(seed),
+        "--run-dir",
+        str(run),
+        "--eval-freq",
+        str(spec["eval_freq"]),
+        "--eval-episodes",
+        str(spec["eval_episodes"]),
+        "--checkpoint-freq",
+        str(spec["checkpoint_freq"]),
+        "--no-progress",
+    ]
     if conf:
         argv += ["--conf", conf]
     for k in ("n_timesteps", "n_envs"):
         if spec[k] is not None:
             argv += ["--" + k.replace("_", "-"), str(spec[k])]
     args = T.build_parser().parse_args(argv)
-    T.train(args, command="python -m agents.train " + shlex.join(argv),
-            on_eval=lambda steps, reward: tune.report({METRIC: reward, TIME_ATTR: steps}))
+    T.train(
+        args,
+        command="python -m agents.train " + shlex.join(argv),
+        on_eval=lambda steps, reward: tune.report({METRIC: reward, TIME_ATTR: steps}),
+    )
     tune.report(run_result(run))
 
 
@@ -519,27 +644,42 @@ def _progress_callback(total: int):
         def _line(self, trials, trial, what, ended=True):
             # trials ended so far, this one included where it has ended (Tune sets its status
             # after the callbacks)
-            n = ended + sum(t.status in ("TERMINATED", "ERROR") for t in trials
-                            if t is not trial)
+            n = ended + sum(t.status in ("TERMINATED", "ERROR") for t in trials if t is not trial)
             r = trial.last_result or {}
             reward = r.get(METRIC)
-            tail = "" if reward is None else (
-                f": eval reward {reward:.4g} at {r.get(TIME_ATTR)} env steps"
-                + (f", {r['wall_s']:.0f} s" if "wall_s" in r else ""))
-            print(f"[{time.perf_counter() - getattr(self, 't0', time.perf_counter()):6.0f} s] "
-                  f"{n}/{total} {trial_name(trial)} {what}{tail}", flush=True)
+            tail = (
+                ""
+                if reward is None
+                else (
+                    f": eval reward {reward:.4g} at {r.get(TIME_ATTR)} env steps"
+                    + (f", {r['wall_s']:.0f} s" if "wall_s" in r else "")
+                )
+            )
+            print(
+                f"[{time.perf_counter() - getattr(self, 't0', time.perf_counter()):6.0f} s] "
+                f"{n}/{total} {trial_name(trial)} {what}{tail}",
+                flush=True,
+            )
 
         def on_trial_complete(self, iteration, trials, trial, **info):
             r = trial.last_result or {}
             self._line(trials, trial, "finished" if r.get("finished") else "stopped early")
 
         def on_trial_recover(self, iteration, trials, trial, **info):
-            self._line(trials, trial, f"failed, retrying (failure {trial.num_failures}): "
-                       f"{_error_line(trial)}", ended=False)
+            self._line(
+                trials,
+                trial,
+                f"failed, retrying (failure {trial.num_failures}): {_error_line(trial)}",
+                ended=False,
+            )
 
         def on_trial_error(self, iteration, trials, trial, **info):
-            self._line(trials, trial, f"FAILED ({trial.num_failures} failures): "
-                       f"{_error_line(trial)}; log: {trial.error_file}")
+            self._line(
+                trials,
+                trial,
+                f"FAILED ({trial.num_failures} failures): "
+                f"{_error_line(trial)}; log: {trial.error_file}",
+            )
 
     return Progress()
 
@@ -562,12 +702,16 @@ def _install_stop_handlers() -> dict:
         got["signals"].append(signum)
         tune_handler = signal.getsignal(signal.SIGUSR1)
         if len(got["signals"]) == 1 and callable(tune_handler):
-            print(f"{PROG}: stopping: the trials that run now are stopped, the sweep's state "
-                  "is saved (--resume continues it); send the signal again to stop at once",
-                  file=sys.stderr, flush=True)
+            print(
+                f"{PROG}: stopping: the trials that run now are stopped, the sweep's state "
+                "is saved (--resume continues it); send the signal again to stop at once",
+                file=sys.stderr,
+                flush=True,
+            )
             signal.raise_signal(signal.SIGUSR1)
         else:
             raise KeyboardInterrupt
+
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
     return got
@@ -577,11 +721,15 @@ def _start_ray(address: str | None):
     import logging
 
     import ray
+
     logging.getLogger("ray").setLevel(logging.WARNING)
     # Tune's advice on stopping and resuming names its Python API; ours names --resume
     logging.getLogger("ray.tune.tune").setLevel(logging.ERROR)
-    kw = {"log_to_driver": False, "logging_level": logging.WARNING,
-          "runtime_env": {"env_vars": dict(TRIAL_ENV)}}
+    kw = {
+        "log_to_driver": False,
+        "logging_level": logging.WARNING,
+        "runtime_env": {"env_vars": dict(TRIAL_ENV)},
+    }
     if address:
         ray.init(address=address, **kw)
     else:  # a local instance on this machine's cores
@@ -592,47 +740,83 @@ def _start_ray(address: str | None):
 def _tuner(sweep: dict, resume: bool, progress):
     """Tune's Tuner for the sweep, or the saved one restored."""
     from ray import tune
+
     exp = experiment_dir(sweep)
-    spec = {k: sweep[k] for k in ("kind", "n_timesteps", "n_envs", "eval_freq",
-                                  "eval_episodes", "checkpoint_freq")}
+    spec = {
+        k: sweep[k]
+        for k in ("kind", "n_timesteps", "n_envs", "eval_freq", "eval_episodes", "checkpoint_freq")
+    }
     if sweep["kind"] == "search":
-        spec.update(algo=sweep["algo"], scene=sweep["scene"], seed=sweep["seed"],
-                    base=sweep["base"], trials_dir=str(exp / "trials"))
-    trainable = tune.with_resources(tune.with_parameters(run_trial, spec=spec),
-                                    {"cpu": sweep["cpus_per_trial"]})
+        spec.update(
+            algo=sweep["algo"],
+            scene=sweep["scene"],
+            seed=sweep["seed"],
+            base=sweep["base"],
+            trials_dir=str(exp / "trials"),
+        )
+    trainable = tune.with_resources(
+        tune.with_parameters(run_trial, spec=spec), {"cpu": sweep["cpus_per_trial"]}
+    )
     if resume:  # unfinished trials start again, failed ones are tried again, from scratch
-        return tune.Tuner.restore(str(exp), trainable, resume_unfinished=True,
-                                  restart_errored=True)
+        return tune.Tuner.restore(str(exp), trainable, resume_unfinished=True, restart_errored=True)
     run_config = tune.RunConfig(
-        name=sweep["name"], storage_path=sweep["storage"], verbose=0, callbacks=[progress],
-        failure_config=tune.FailureConfig(max_failures=sweep["max_failures"]))
-    common = {"reuse_actors": True, "max_concurrent_trials": sweep["max_concurrent"] or None,
-              "trial_name_creator": trial_name, "trial_dirname_creator": trial_dirname}
+        name=sweep["name"],
+        storage_path=sweep["storage"],
+        verbose=0,
+        callbacks=[progress],
+        failure_config=tune.FailureConfig(max_failures=sweep["max_failures"]),
+    )
+    common = {
+        "reuse_actors": True,
+        "max_concurrent_trials": sweep["max_concurrent"] or None,
+        "trial_name_creator": trial_name,
+        "trial_dirname_creator": trial_dirname,
+    }
     if sweep["kind"] == "grid":
-        return tune.Tuner(trainable, param_space={"trial": tune.grid_search(grid_trials(sweep))},
-                          tune_config=tune.TuneConfig(**common), run_config=run_config)
+        return tune.Tuner(
+            trainable,
+            param_space={"trial": tune.grid_search(grid_trials(sweep))},
+            tune_config=tune.TuneConfig(**common),
+            run_config=run_config,
+        )
     import optuna
     from ray.tune.schedulers import ASHAScheduler
     from ray.tune.search.optuna import OptunaSearch
+
     optuna.logging.set_verbosity(optuna.logging.WARNING)  # one line per trial is ours
-    dims = {"uniform": tune.uniform, "loguniform": tune.loguniform, "choice": tune.choice,
-            "int": lambda lo, hi: tune.randint(lo, hi + 1),  # Tune's upper end is exclusive
-            "logint": lambda lo, hi: tune.lograndint(lo, hi + 1)}
+    dims = {
+        "uniform": tune.uniform,
+        "loguniform": tune.loguniform,
+        "choice": tune.choice,
+        "int": lambda lo, hi: tune.randint(lo, hi + 1),  # Tune's upper end is exclusive
+        "logint": lambda lo, hi: tune.lograndint(lo, hi + 1),
+    }
     space = {}
     for k, d in sweep["space"].items():
         kind, args = next(iter(d.items()))
         space[k] = dims[kind](args) if kind == "choice" else dims[kind](*args)
     # ASHA stops poor trials at its rungs only: a trial that passes them ends when its
     # training does (its final model saved), not at max_t
-    scheduler = ASHAScheduler(time_attr=TIME_ATTR, max_t=sweep["n_timesteps"],
-                              grace_period=sweep["grace_period"],
-                              reduction_factor=sweep["reduction_factor"],
-                              stop_last_trials=False)
-    return tune.Tuner(trainable, param_space=space, run_config=run_config,
-                      tune_config=tune.TuneConfig(
-                          metric=METRIC, mode="max", num_samples=sweep["trials"],
-                          search_alg=OptunaSearch(seed=sweep["search_seed"]),
-                          scheduler=scheduler, **common))
+    scheduler = ASHAScheduler(
+        time_attr=TIME_ATTR,
+        max_t=sweep["n_timesteps"],
+        grace_period=sweep["grace_period"],
+        reduction_factor=sweep["reduction_factor"],
+        stop_last_trials=False,
+    )
+    return tune.Tuner(
+        trainable,
+        param_space=space,
+        run_config=run_config,
+        tune_config=tune.TuneConfig(
+            metric=METRIC,
+            mode="max",
+            num_samples=sweep["trials"],
+            search_alg=OptunaSearch(seed=sweep["search_seed"]),
+            scheduler=scheduler,
+            **common,
+        ),
+    )
 
 
 def _rows(sweep: dict, results, interrupted: bool = False) -> list[dict]:
@@ -643,20 +827,37 @@ def _rows(sweep: dict, results, interrupted: bool = False) -> list[dict]:
         m = r.metrics or {}
         cfg = r.config or {}
         t = cfg.get("trial") if sweep["kind"] == "grid" else None
-        status = ("failed" if r.error is not None else "done" if m.get("finished")
-                  else "unfinished" if interrupted or t else "stopped early")
-        row = {"trial": t["label"] if t else (m.get("trial_id") or Path(r.path).name),
-               "scene": scene_key(t["scene"] if t else sweep["scene"]),
-               "seed": t["seed"] if t else sweep["seed"], "status": status,
-               METRIC: m.get(METRIC), TIME_ATTR: m.get(TIME_ATTR), "wall_s": m.get("wall_s"),
-               "values": {k: cfg.get(k) for k in sweep.get("space", {})}}
+        status = (
+            "failed"
+            if r.error is not None
+            else "done"
+            if m.get("finished")
+            else "unfinished"
+            if interrupted or t
+            else "stopped early"
+        )
+        row = {
+            "trial": t["label"] if t else (m.get("trial_id") or Path(r.path).name),
+            "scene": scene_key(t["scene"] if t else sweep["scene"]),
+            "seed": t["seed"] if t else sweep["seed"],
+            "status": status,
+            METRIC: m.get(METRIC),
+            TIME_ATTR: m.get(TIME_ATTR),
+            "wall_s": m.get("wall_s"),
+            "values": {k: cfg.get(k) for k in sweep.get("space", {})},
+        }
         rows.append(row)
     if sweep["kind"] == "grid":
         order = {t["label"]: i for i, t in enumerate(grid_trials(sweep))}
         rows.sort(key=lambda x: order.get(x["trial"], len(order)))
     else:
-        rows.sort(key=lambda x: -x[METRIC] if isinstance(x[METRIC], float)
-                  and math.isfinite(x[METRIC]) else math.inf)
+        rows.sort(
+            key=lambda x: (
+                -x[METRIC]
+                if isinstance(x[METRIC], float) and math.isfinite(x[METRIC])
+                else math.inf
+            )
+        )
     return rows
 
 
@@ -671,11 +872,29 @@ def _fmt(v) -> str:
 def summary_table(rows: list[dict]) -> str:
     """The rows as an aligned text table (the searched values as extra columns)."""
     extra = list(rows[0]["values"]) if rows else []
-    head = ["trial", "scene", "seed", *extra, "status", "final eval reward", "env steps",
-            "wall [s]"]
-    body = [[r["trial"], r["scene"], _fmt(r["seed"]), *(_fmt(r["values"][k]) for k in extra),
-             r["status"], _fmt(r[METRIC]), _fmt(r[TIME_ATTR]),
-             "-" if r["wall_s"] is None else f"{r['wall_s']:.0f}"] for r in rows]
+    head = [
+        "trial",
+        "scene",
+        "seed",
+        *extra,
+        "status",
+        "final eval reward",
+        "env steps",
+        "wall [s]",
+    ]
+    body = [
+        [
+            r["trial"],
+            r["scene"],
+            _fmt(r["seed"]),
+            *(_fmt(r["values"][k]) for k in extra),
+            r["status"],
+            _fmt(r[METRIC]),
+            _fmt(r[TIME_ATTR]),
+            "-" if r["wall_s"] is None else f"{r['wall_s']:.0f}",
+        ]
+        for r in rows
+    ]
     widths = [max(len(x) for x in col) for col in zip(head, *body)]
     line = lambda cells: "  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip()
     return "\n".join([line(head), line(["-" * w for w in widths])] + [line(b) for b in body])
@@ -684,22 +903,28 @@ def summary_table(rows: list[dict]) -> str:
 def write_best(sweep: dict, rows: list[dict]) -> dict | None:
     """Write the best finished trial's entry into ``output`` (atomically, keyed by the scene;
     the file's other entries kept); the entry, or None where no trial finished."""
-    done = [r for r in rows if r["status"] == "done" and isinstance(r[METRIC], float)
-            and math.isfinite(r[METRIC])]
+    done = [
+        r
+        for r in rows
+        if r["status"] == "done" and isinstance(r[METRIC], float) and math.isfinite(r[METRIC])
+    ]
     if not done:
         return None
     best = max(done, key=lambda r: r[METRIC])
     from rolling_env.scenes import read_yaml
+
     out = Path(sweep["output"])
     table = (read_yaml(out, "hyper-parameter file") or {}) if out.exists() else {}
     key = scene_key(sweep["scene"])
     entry = dict(sweep["base"], **_plain(best["values"]))
     table[key] = entry
-    head = (f"# {sweep['algo']} on {key}: best of {len(rows)} trials of "
-            f"`python -m agents.sweep` search {sweep['name']!r} ({sweep['n_timesteps']} env steps "
-            f"each, seed {sweep['seed']}; last evaluation's mean reward {best[METRIC]:.4g}).\n"
-            "# RL Zoo format; `python -m agents.train --algo "
-            f"{sweep['algo']} --scene {key} --conf <this file>` trains it.\n")
+    head = (
+        f"# {sweep['algo']} on {key}: best of {len(rows)} trials of "
+        f"`python -m agents.sweep` search {sweep['name']!r} ({sweep['n_timesteps']} env steps "
+        f"each, seed {sweep['seed']}; last evaluation's mean reward {best[METRIC]:.4g}).\n"
+        "# RL Zoo format; `python -m agents.train --algo "
+        f"{sweep['algo']} --scene {key} --conf <this file>` trains it.\n"
+    )
     text = head + yaml.safe_dump(table, sort_keys=False)
     atomic_write(out, lambda p: Path(p).write_text(text))
     return entry
@@ -708,12 +933,18 @@ def write_best(sweep: dict, rows: list[dict]) -> dict | None:
 def build_parser():
     p = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
     p.add_argument("--config", required=True, help="sweep file (YAML), e.g. configs/sweeps/...")
-    p.add_argument("--address", default=None,
-                   help="join this Ray cluster (e.g. 'auto' or 'head-node:6379'); default: a "
-                        "local Ray instance on this machine's cores")
-    p.add_argument("--resume", action="store_true",
-                   help="continue the sweep saved in <storage>/<name>/: finished trials are "
-                        "kept, unfinished and failed ones run again")
+    p.add_argument(
+        "--address",
+        default=None,
+        help="join this Ray cluster (e.g. 'auto' or 'head-node:6379'); default: a "
+        "local Ray instance on this machine's cores",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the sweep saved in <storage>/<name>/: finished trials are "
+        "kept, unfinished and failed ones run again",
+    )
     return p
 
 
@@ -724,10 +955,11 @@ def main(argv=None) -> int:
         check_start(sweep, args.resume)
         try:
             import ray.tune
+
             if sweep["kind"] == "search":
                 import optuna  # noqa: F401
         except ImportError as e:
-            raise SweepError(f"{e.name} is not installed: pip install -e \".[sweep]\"") from None
+            raise SweepError(f'{e.name} is not installed: pip install -e ".[sweep]"') from None
     except SweepError as e:
         where = "" if str(e).startswith("--resume") else f"{args.config}: "
         print(f"{PROG}: error: {where}{e}", file=sys.stderr)
@@ -741,13 +973,20 @@ def main(argv=None) -> int:
     try:
         got = _install_stop_handlers()  # after ray.init, which sets its own SIGTERM handler
         if not args.resume:
-            atomic_write(exp / SWEEP_FILE, lambda p: Path(p).write_text(
-                yaml.safe_dump(json.loads(json.dumps(sweep)), sort_keys=False)))
+            atomic_write(
+                exp / SWEEP_FILE,
+                lambda p: Path(p).write_text(
+                    yaml.safe_dump(json.loads(json.dumps(sweep)), sort_keys=False)
+                ),
+            )
         cpus = ray.cluster_resources().get("CPU", 0)
-        print(f"{PROG}: {sweep['kind']} {sweep['name']!r}: {total} trials, "
-              f"{sweep['cpus_per_trial']:g} CPU each, {cpus:g} CPUs "
-              f"({'cluster ' + args.address if args.address else 'local'}); state in "
-              f"{str(exp)!r}" + (" (resumed)" if args.resume else ""), flush=True)
+        print(
+            f"{PROG}: {sweep['kind']} {sweep['name']!r}: {total} trials, "
+            f"{sweep['cpus_per_trial']:g} CPU each, {cpus:g} CPUs "
+            f"({'cluster ' + args.address if args.address else 'local'}); state in "
+            f"{str(exp)!r}" + (" (resumed)" if args.resume else ""),
+            flush=True,
+        )
         t0 = time.perf_counter()
         results = _tuner(sweep, args.resume, _progress_callback(total)).fit()
         wall = time.perf_counter() - t0
@@ -756,24 +995,36 @@ def main(argv=None) -> int:
         print(summary_table(rows))
         n_done = sum(r["status"] == "done" for r in rows)
         n_failed = sum(r["status"] == "failed" for r in rows)
-        print(f"\n{n_done} of {len(rows)} trials finished, {n_failed} failed; {wall:.0f} s "
-              "(this invocation)", flush=True)
+        print(
+            f"\n{n_done} of {len(rows)} trials finished, {n_failed} failed; {wall:.0f} s "
+            "(this invocation)",
+            flush=True,
+        )
         if got["signals"]:
-            print(f"{PROG}: interrupted; continue with: {PROG} --config {args.config} --resume"
-                  + (f" --address {args.address}" if args.address else ""), file=sys.stderr)
+            print(
+                f"{PROG}: interrupted; continue with: {PROG} --config {args.config} --resume"
+                + (f" --address {args.address}" if args.address else ""),
+                file=sys.stderr,
+            )
             return 128 + got["signals"][0]
         if sweep["kind"] == "search":
             entry = write_best(sweep, rows)
             if entry is None:
-                print(f"{PROG}: no trial finished: nothing written to {sweep['output']!r}",
-                      file=sys.stderr)
+                print(
+                    f"{PROG}: no trial finished: nothing written to {sweep['output']!r}",
+                    file=sys.stderr,
+                )
                 return 1
-            print(f"best entry for {scene_key(sweep['scene'])!r} written to "
-                  f"{sweep['output']!r}: " + json.dumps({k: entry[k] for k in sweep["space"]}))
+            print(
+                f"best entry for {scene_key(sweep['scene'])!r} written to "
+                f"{sweep['output']!r}: " + json.dumps({k: entry[k] for k in sweep["space"]})
+            )
         return 1 if n_failed else 0
     except KeyboardInterrupt:  # the second signal: Tune's state is what it saved last
-        print(f"{PROG}: stopped at once; --resume continues from the last saved state",
-              file=sys.stderr)
+        print(
+            f"{PROG}: stopped at once; --resume continues from the last saved state",
+            file=sys.stderr,
+        )
         return 130
     finally:
         ray.shutdown()

@@ -8,7 +8,8 @@ scene's name, a scene file's stem, or ``<stem>-<digest8>`` for a file named like
 scene with other content) keeps config.yml (with the scene's fields and digest), command.txt,
 meta.json (seed, package versions, env steps, wall time, git commit, thread settings, and
 the vector env trained on: ``--vec-env auto``, the default, measures the batched env and a
-DummyVecEnv of single envs for about a second and takes the faster), the TensorBoard log (tb/), the EvalCallback log (evaluations.npz) and best model, periodic
+DummyVecEnv of single envs for about a second and takes the faster), the TensorBoard log (tb/),
+the EvalCallback log (evaluations.npz) and best model, periodic
 checkpoints, and the final
 model.zip with model_vecnormalize.pkl beside it.  Every file is written atomically; Ctrl-C or
 SIGTERM saves a final checkpoint before exiting with 130 / 143 (128 + the signal).  A run
@@ -19,6 +20,7 @@ new run that is stopped or fails leaves the earlier run as it was and its own fi
 stopped run's checkpoint.zip among them, in ``<run>.overwrite``); there is no resume:
 a stopped run keeps its checkpoint.zip, and a new run starts from scratch in another folder.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -37,12 +39,23 @@ import yaml
 
 from rolling_env.cli import positive_int
 
+from .common import (
+    ALGOS,
+    action_noise,
+    atomic_write,
+    buildable_scene,
+    check_hyperparams,
+    check_policy,
+    load_hyperparams,
+    make_vec_env,
+    save_model,
+    scene_digest,
+    scene_fields,
+    scene_key,
+)
 from .residual import BASES as RESIDUAL_BASES
 from .residual import SCALE_DEFAULT as RESIDUAL_SCALE
 from .residual import ResidualVecEnv
-from .common import (ALGOS, action_noise, atomic_write, buildable_scene, check_hyperparams,
-                     check_policy, load_hyperparams, make_vec_env, save_model, scene_digest,
-                     scene_fields, scene_key)
 
 SEED_MAX = 2**31 - 1 - 10_000  # the evaluation env is seeded seed + 10000
 #: thread settings recorded in meta.json (none changes a transition; torch runs on one thread)
@@ -53,59 +66,107 @@ def source_commit() -> str | None:
     """The git commit of the code that trained (with "-dirty" where tracked files differ),
     None outside a git checkout or without git."""
     import subprocess
+
     root = Path(__file__).resolve().parent.parent
     try:
-        head = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True,
-                              text=True, timeout=10)
+        head = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
         if head.returncode != 0:
             return None
-        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain",
-                                "--untracked-files=no"], capture_output=True, text=True,
-                               timeout=10)
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
     except (OSError, subprocess.SubprocessError):
         return None
     return head.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
+
 
 def build_parser():
     p = argparse.ArgumentParser(prog="python -m agents.train", description=__doc__.splitlines()[0])
     p.add_argument("--algo", choices=ALGOS, required=True)
     p.add_argument("--scene", default="default", help="scene name or YAML path")
     p.add_argument("--seed", type=positive_int("seed", 0, SEED_MAX), default=0)
-    p.add_argument("--n-timesteps", type=positive_int("n-timesteps", 1, 10**12), default=None,
-                   help="override the YAML budget")
-    p.add_argument("--n-envs", type=positive_int("n-envs", 1, 4096), default=None,
-                   help="override the YAML n_envs")
+    p.add_argument(
+        "--n-timesteps",
+        type=positive_int("n-timesteps", 1, 10**12),
+        default=None,
+        help="override the YAML budget",
+    )
+    p.add_argument(
+        "--n-envs",
+        type=positive_int("n-envs", 1, 4096),
+        default=None,
+        help="override the YAML n_envs",
+    )
     p.add_argument("--conf", default=None, help="hyper-parameter YAML (default configs/...)")
-    p.add_argument("--run-dir", default=None, help="run folder (default runs/<scene key>/<algo>_seed<seed>); "
-                   "a folder that already holds files is refused unless --overwrite")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace an existing run folder created by this script and holding "
-                   "only its files; the new run trains in <run-dir>.overwrite and replaces "
-                   "it only once finished (if stopped or failed, the earlier run is kept and "
-                   "the new run's files, its checkpoint.zip among them, stay in "
-                   "<run-dir>.overwrite)")
-    p.add_argument("--eval-freq", type=positive_int("eval-freq", 1, 10**12), default=10000,
-                   help="env steps between evaluations")
+    p.add_argument(
+        "--run-dir",
+        default=None,
+        help="run folder (default runs/<scene key>/<algo>_seed<seed>); "
+        "a folder that already holds files is refused unless --overwrite",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an existing run folder created by this script and holding "
+        "only its files; the new run trains in <run-dir>.overwrite and replaces "
+        "it only once finished (if stopped or failed, the earlier run is kept and "
+        "the new run's files, its checkpoint.zip among them, stay in "
+        "<run-dir>.overwrite)",
+    )
+    p.add_argument(
+        "--eval-freq",
+        type=positive_int("eval-freq", 1, 10**12),
+        default=10000,
+        help="env steps between evaluations",
+    )
     p.add_argument("--eval-episodes", type=positive_int("eval-episodes", 1, 10**6), default=5)
-    p.add_argument("--checkpoint-freq", type=positive_int("checkpoint-freq", 1, 10**12),
-                   default=50000, help="env steps between checkpoints")
+    p.add_argument(
+        "--checkpoint-freq",
+        type=positive_int("checkpoint-freq", 1, 10**12),
+        default=50000,
+        help="env steps between checkpoints",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--vec-env", choices=("auto",) + VEC_ENVS, default="auto",
-                   help="training vector env: the natively batched env, SB3's DummyVecEnv of "
-                   "single envs, or auto (default): whichever steps faster here, measured for "
-                   "about a second at start and recorded in meta.json (both give the same "
-                   "transitions)")
-    p.add_argument("--residual", choices=sorted(RESIDUAL_BASES), default=None,
-                   help="train a residual policy: its action, times --residual-scale, is added "
-                   "to this baseline's (overrides the hyper-parameter entry's 'residual'; "
-                   "the run folder is named <algo>-residual_seed<N>)")
-    p.add_argument("--residual-scale", type=float, default=None,
-                   help=f"how far the residual policy moves each action, in (0, 2] "
-                   f"(default: the entry's residual_scale, else {RESIDUAL_SCALE})")
-    p.add_argument("--num-threads", type=num_threads_arg, default=None,
-                   help="numba threads of the batched env: auto (default: the serial or "
-                   "the threaded kernel, chosen step by step from measured step times) or "
-                   "1 (serial kernel) to NUMBA_NUM_THREADS")
+    p.add_argument(
+        "--vec-env",
+        choices=("auto",) + VEC_ENVS,
+        default="auto",
+        help="training vector env: the natively batched env, SB3's DummyVecEnv of "
+        "single envs, or auto (default): whichever steps faster here, measured for "
+        "about a second at start and recorded in meta.json (both give the same "
+        "transitions)",
+    )
+    p.add_argument(
+        "--residual",
+        choices=sorted(RESIDUAL_BASES),
+        default=None,
+        help="train a residual policy: its action, times --residual-scale, is added "
+        "to this baseline's (overrides the hyper-parameter entry's 'residual'; "
+        "the run folder is named <algo>-residual_seed<N>)",
+    )
+    p.add_argument(
+        "--residual-scale",
+        type=float,
+        default=None,
+        help=f"how far the residual policy moves each action, in (0, 2] "
+        f"(default: the entry's residual_scale, else {RESIDUAL_SCALE})",
+    )
+    p.add_argument(
+        "--num-threads",
+        type=num_threads_arg,
+        default=None,
+        help="numba threads of the batched env: auto (default: the serial or "
+        "the threaded kernel, chosen step by step from measured step times) or "
+        "1 (serial kernel) to NUMBA_NUM_THREADS",
+    )
     return p
 
 
@@ -121,14 +182,15 @@ class _AtomicCheckpoint:
                 n = self.model.num_timesteps
                 if n // every_env_steps > getattr(self, "_last", 0):
                     self._last = n // every_env_steps
-                    save_model(self.model, self.model.get_vec_normalize_env(), folder,
-                               "checkpoint")
+                    save_model(self.model, self.model.get_vec_normalize_env(), folder, "checkpoint")
                 return True
+
         return Cb()
 
 
-def _eval_callback(eval_env, run: Path, eval_freq: int, n_episodes: int, on_eval=None,
-                   tol: float | None = None):
+def _eval_callback(
+    eval_env, run: Path, eval_freq: int, n_episodes: int, on_eval=None, tol: float | None = None
+):
     """SB3's EvalCallback with every file written atomically: it logs to a scratch folder
     (``run/.eval_scratch``, removed at the end) and after each evaluation the log is copied
     atomically to ``run/evaluations.npz``; a new best model is saved atomically as
@@ -157,8 +219,9 @@ def _eval_callback(eval_env, run: Path, eval_freq: int, n_episodes: int, on_eval
             info, i = locals_["info"], locals_["i"]
             self._slip[i] = self._slip.get(i, 0.0) + float(info.get("slip_work", 0.0))
             if locals_["done"] and "xstar" in info:
-                self._goal_eps.append((abs(float(info["target"]) - float(info["xstar"])),
-                                       self._slip.pop(i)))
+                self._goal_eps.append(
+                    (abs(float(info["target"]) - float(info["xstar"])), self._slip.pop(i))
+                )
 
     class OnNewBest(BaseCallback):
         def _on_step(self):
@@ -169,28 +232,44 @@ def _eval_callback(eval_env, run: Path, eval_freq: int, n_episodes: int, on_eval
         def _on_step(self):
             src = scratch / "evaluations.npz"
             if src.exists():
-                atomic_write(run / "evaluations.npz",
-                             lambda p: Path(p).write_bytes(src.read_bytes()))
+                atomic_write(
+                    run / "evaluations.npz", lambda p: Path(p).write_bytes(src.read_bytes())
+                )
             eps = getattr(self.parent, "_goal_eps", [])
             if eps:
-                log.append({"env_steps": int(self.num_timesteps),
-                            "wall_seconds": round(time.perf_counter() - t0, 2),
-                            "final_abs_error": [e for e, _ in eps],
-                            "slip_work": [w for _, w in eps]})
+                log.append(
+                    {
+                        "env_steps": int(self.num_timesteps),
+                        "wall_seconds": round(time.perf_counter() - t0, 2),
+                        "final_abs_error": [e for e, _ in eps],
+                        "slip_work": [w for _, w in eps],
+                    }
+                )
                 atomic_write(run / GOAL_LOG, lambda p: Path(p).write_text(json.dumps(log)))
                 if tol:  # one line per evaluation: what a user watches a run by
                     err = sum(e for e, _ in eps) / len(eps) / tol
                     slip = sum(w for _, w in eps) / len(eps)
-                    print(f"eval at {self.num_timesteps:,} env steps: mean reward "
-                          f"{self.parent.last_mean_reward:.2f}, final |error| {err:.2f} "
-                          f"tolerance, slip work {slip:.3g} J", flush=True)
+                    print(
+                        f"eval at {self.num_timesteps:,} env steps: mean reward "
+                        f"{self.parent.last_mean_reward:.2f}, final |error| {err:.2f} "
+                        f"tolerance, slip work {slip:.3g} J",
+                        flush=True,
+                    )
             if on_eval is not None:
                 on_eval(int(self.num_timesteps), float(self.parent.last_mean_reward))
             return True
 
-    return GoalEval(eval_env, best_model_save_path=None, log_path=str(scratch),
-                        eval_freq=eval_freq, n_eval_episodes=n_episodes, deterministic=True,
-                        verbose=0, callback_on_new_best=OnNewBest(), callback_after_eval=AfterEval())
+    return GoalEval(
+        eval_env,
+        best_model_save_path=None,
+        log_path=str(scratch),
+        eval_freq=eval_freq,
+        n_eval_episodes=n_episodes,
+        deterministic=True,
+        verbose=0,
+        callback_on_new_best=OnNewBest(),
+        callback_after_eval=AfterEval(),
+    )
 
 
 class UsageError(ValueError):
@@ -204,6 +283,7 @@ GOAL_LOG = "eval_goal.json"  # final errors and slip work of the periodic evalua
 def num_threads_arg(text):
     """argparse type of --num-threads: 'auto' (None) or an integer in [1, NUMBA_NUM_THREADS]."""
     from rolling_env.vector import max_threads
+
     hi = max_threads()
     if text == "auto":
         return None
@@ -212,21 +292,26 @@ def num_threads_arg(text):
     except ValueError:
         x = 0
     if not 1 <= x <= hi:
-        raise argparse.ArgumentTypeError(f"num-threads must be 'auto' or an integer in "
-                                         f"[1, {hi}], got {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"num-threads must be 'auto' or an integer in [1, {hi}], got {text!r}"
+        )
     return x
 
 
-def measure_vec_envs(scene, n_envs: int, env_kwargs, num_threads=None, seconds=1.0,
-                     rounds=3) -> dict:
+def measure_vec_envs(
+    scene, n_envs: int, env_kwargs, num_threads=None, seconds=1.0, rounds=3
+) -> dict:
     """Env steps/s of each kind of training vector env (``VEC_ENVS``) here and now: random
     actions, timed passes of the kinds in turn (``rounds`` rounds, ``seconds`` in all), the
     best pass of each counting.  The batched env's own thread choice settles in the untimed
     warm-up."""
     import numpy as np
+
     acts = np.random.default_rng(0).uniform(-1, 1, (64, n_envs, 3)).astype(np.float32)
-    envs = {k: make_vec_env(scene, n_envs, 0, env_kwargs, kind=k, num_threads=num_threads)
-            for k in VEC_ENVS}
+    envs = {
+        k: make_vec_env(scene, n_envs, 0, env_kwargs, kind=k, num_threads=num_threads)
+        for k in VEC_ENVS
+    }
     best = dict.fromkeys(envs, 0.0)
     try:
         for env in envs.values():
@@ -247,22 +332,29 @@ def measure_vec_envs(scene, n_envs: int, env_kwargs, num_threads=None, seconds=1
     return best
 
 
-def choose_vec_env(flag: str, scene, n_envs: int, env_kwargs, num_threads=None,
-                   measure=measure_vec_envs):
+def choose_vec_env(
+    flag: str, scene, n_envs: int, env_kwargs, num_threads=None, measure=measure_vec_envs
+):
     """The training vector env's kind and what decided it: ``flag`` ("auto" or one of
     ``VEC_ENVS``); for "auto" the faster of ``measure(scene, n_envs, env_kwargs,
     num_threads)`` (env steps/s per kind).  Returns (kind, record for meta.json)."""
     if flag != "auto":
         return flag, {"kind": flag, "chosen_by": "--vec-env"}
     from rolling_env.scenes import load_scene
+
     kw = {k: v for k, v in dict(env_kwargs or {}).items() if k != "scene"}
     if load_scene(scene, **kw).randomize:  # the batched envs step one physics only
-        return "dummy", {"kind": "dummy", "chosen_by": "the scene draws its physics per "
-                         "episode (randomize): single envs"}
+        return "dummy", {
+            "kind": "dummy",
+            "chosen_by": "the scene draws its physics per episode (randomize): single envs",
+        }
     rates = measure(scene, n_envs, env_kwargs, num_threads)
     kind = max(VEC_ENVS, key=lambda k: rates[k])
-    return kind, {"kind": kind, "chosen_by": "measured at start",
-                  "env_steps_per_s": {k: round(rates[k]) for k in VEC_ENVS}}
+    return kind, {
+        "kind": kind,
+        "chosen_by": "measured at start",
+        "env_steps_per_s": {k: round(rates[k]) for k in VEC_ENVS},
+    }
 
 
 def _setup(args, command=None):
@@ -291,10 +383,10 @@ def _setup(args, command=None):
     env_kwargs = checked["env_kwargs"]
     set_random_seed(args.seed)
     try:
-        kind, vec_env = choose_vec_env(args.vec_env, scene, n_envs, env_kwargs,
-                                       args.num_threads)
-        env = make_vec_env(scene, n_envs, args.seed, env_kwargs, kind=kind,
-                           num_threads=args.num_threads)
+        kind, vec_env = choose_vec_env(args.vec_env, scene, n_envs, env_kwargs, args.num_threads)
+        env = make_vec_env(
+            scene, n_envs, args.seed, env_kwargs, kind=kind, num_threads=args.num_threads
+        )
     except ValueError as e:  # scene overrides in env_kwargs
         if "(randomize)" in str(e):  # --vec-env batched on a randomised scene
             raise ValueError(f"--vec-env batched: {e}") from None
@@ -317,39 +409,64 @@ def _setup(args, command=None):
         # a second run into the same folder would mix its files with the first's (and its
         # first checkpoint would overwrite an interrupted run's): refuse, keep what is there
         if not args.overwrite:
-            raise UsageError(f"run folder {str(run)!r} already exists and is not empty: give "
-                             "another --run-dir or --seed, or --overwrite to replace it")
+            raise UsageError(
+                f"run folder {str(run)!r} already exists and is not empty: give "
+                "another --run-dir or --seed, or --overwrite to replace it"
+            )
         why = _not_a_run(run)
         if why:
-            raise UsageError(f"--overwrite replaces only a run folder written by this script; "
-                             f"{str(run)!r} {why}: nothing was deleted")
+            raise UsageError(
+                f"--overwrite replaces only a run folder written by this script; "
+                f"{str(run)!r} {why}: nothing was deleted"
+            )
         work = staging_folder(run)  # the earlier run stays until the new one has finished
         if work.exists() or work.is_symlink():
-            raise UsageError(f"--overwrite trains into {str(work)!r} first, and it exists "
-                             "(left by an interrupted or failed --overwrite run, with its "
-                             "checkpoint): move or delete it first; nothing was deleted")
+            raise UsageError(
+                f"--overwrite trains into {str(work)!r} first, and it exists "
+                "(left by an interrupted or failed --overwrite run, with its "
+                "checkpoint): move or delete it first; nothing was deleted"
+            )
     norm = checked["normalize"]
     if norm is not None:
         env = VecNormalize(env, gamma=float(checked["kwargs"].get("gamma", 0.99)), **norm)
-        eval_env = VecNormalize(eval_env, training=False, norm_reward=False,
-                                norm_obs=norm.get("norm_obs", True))
+        eval_env = VecNormalize(
+            eval_env, training=False, norm_reward=False, norm_obs=norm.get("norm_obs", True)
+        )
     kwargs = dict(checked["kwargs"])
     kwargs.pop("policy_kwargs", None)
     if checked["action_noise"] is not None:
         kwargs["action_noise"] = action_noise(checked["action_noise"])
     cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[args.algo]
-    model = cls(checked["policy"], env, seed=args.seed, verbose=0, device="cpu",
-                tensorboard_log=str(work / "tb"),
-                policy_kwargs=checked["kwargs"].get("policy_kwargs"), **kwargs)
+    model = cls(
+        checked["policy"],
+        env,
+        seed=args.seed,
+        verbose=0,
+        device="cpu",
+        tensorboard_log=str(work / "tb"),
+        policy_kwargs=checked["kwargs"].get("policy_kwargs"),
+        **kwargs,
+    )
     work.mkdir(parents=True, exist_ok=True)  # an empty run folder is simply used
-    atomic_write(work / RUN_MARKER, lambda p: Path(p).write_text(
-        "a run folder of agents.train: --overwrite may replace it\n"))
+    atomic_write(
+        work / RUN_MARKER,
+        lambda p: Path(p).write_text("a run folder of agents.train: --overwrite may replace it\n"),
+    )
     # what the run was trained on, for evaluate and rollout to check: the scene as given, its
     # key (runs/<key>/), and the checked scene's fields with their digest (a scene file's
     # stem alone does not say what was in it)
-    cfg = dict(hp, n_envs=n_envs, n_timesteps=n_timesteps, algo=args.algo, scene=str(scene),
-               seed=args.seed, env_kwargs=dict(env_kwargs, scene=str(scene)), scene_key=key,
-               scene_digest=scene_digest(trained), scene_fields=scene_fields(trained))
+    cfg = dict(
+        hp,
+        n_envs=n_envs,
+        n_timesteps=n_timesteps,
+        algo=args.algo,
+        scene=str(scene),
+        seed=args.seed,
+        env_kwargs=dict(env_kwargs, scene=str(scene)),
+        scene_key=key,
+        scene_digest=scene_digest(trained),
+        scene_fields=scene_fields(trained),
+    )
     atomic_write(work / "config.yml", lambda p: Path(p).write_text(yaml.safe_dump(cfg)))
     command = command or " ".join(sys.argv)
     atomic_write(work / "command.txt", lambda p: Path(p).write_text(command + "\n"))
@@ -373,8 +490,10 @@ def _replace_run(run: Path, work: Path) -> None:
         return
     why = _not_a_run(run)
     if why:
-        raise UsageError(f"the new run is complete in {str(work)!r}, but {str(run)!r} {why} "
-                         "now (changed while training): nothing was deleted")
+        raise UsageError(
+            f"the new run is complete in {str(work)!r}, but {str(run)!r} {why} "
+            "now (changed while training): nothing was deleted"
+        )
     old = run.with_name(f".{run.name}.replaced-{os.getpid()}")
     held = {signal.SIGINT, signal.SIGTERM}
     mask = getattr(signal, "pthread_sigmask", lambda how, sigs: None)  # POSIX only
@@ -391,18 +510,22 @@ def _replace_run(run: Path, work: Path) -> None:
     try:  # signals no longer held: deleting a large tb/ takes a while
         shutil.rmtree(old)
     except OSError as e:  # the new run is in place: warn, leave the hidden folder
-        print(f"python -m agents.train: warning: the new run is in {str(run)!r}, but the "
-              f"earlier run left in {str(old)!r} could not be deleted ({e.strerror or e})",
-              file=sys.stderr)
+        print(
+            f"python -m agents.train: warning: the new run is in {str(run)!r}, but the "
+            f"earlier run left in {str(old)!r} could not be deleted ({e.strerror or e})",
+            file=sys.stderr,
+        )
 
 
 RUN_MARKER = "rolling-drive-run.txt"  # written when the script creates a run folder
 RUN_FILES = re.compile(  # what the script (and SB3's TensorBoard logger) writes in a run folder
     r"^(config\.yml|command\.txt|meta\.json|evaluations\.npz|eval_goal\.json|tb|"
     r"\.eval_scratch|"
-    + re.escape(RUN_MARKER) + r"|(model|best_model|checkpoint)(\.zip|_vecnormalize\.pkl)|"
+    + re.escape(RUN_MARKER)
+    + r"|(model|best_model|checkpoint)(\.zip|_vecnormalize\.pkl)|"
     r"\.(config|command|meta|evaluations|eval_goal|model|best_model|checkpoint)(_vecnormalize)?"
-    r"\.[^/]+\.(yml|txt|json|npz|zip|pkl))$")  # the last line: atomic writes' temporary files
+    r"\.[^/]+\.(yml|txt|json|npz|zip|pkl))$"
+)  # the last line: atomic writes' temporary files
 TB_FILES = re.compile(r"^(ppo|sac|td3)_\d+(/events\.out\.tfevents\.[^/]+)?$")
 SCRATCH_FILES = re.compile(r"^evaluations\.npz$")
 
@@ -421,15 +544,23 @@ def _not_a_run(run: Path) -> str:
     if not run.is_dir():
         return "is not a folder"
     if not (run / RUN_MARKER).is_file():
-        return (f"has no {RUN_MARKER} marker (only folders this script created can be "
-                "replaced; delete an older run folder by hand)")
+        return (
+            f"has no {RUN_MARKER} marker (only folders this script created can be "
+            "replaced; delete an older run folder by hand)"
+        )
     other = []
     for p in run.rglob("*"):
         rel = p.relative_to(run)
         top, sub = rel.parts[0], "/".join(rel.parts[1:])
-        ok = (not p.is_symlink() and RUN_FILES.match(top) is not None
-              and (not sub or (top == "tb" and TB_FILES.match(sub) is not None)
-                   or (top == ".eval_scratch" and SCRATCH_FILES.match(sub) is not None)))
+        ok = (
+            not p.is_symlink()
+            and RUN_FILES.match(top) is not None
+            and (
+                not sub
+                or (top == "tb" and TB_FILES.match(sub) is not None)
+                or (top == ".eval_scratch" and SCRATCH_FILES.match(sub) is not None)
+            )
+        )
         if not ok:
             other.append(str(rel))
     if other:
@@ -452,64 +583,89 @@ def train(args, *, command: str | None = None, on_eval=None) -> Path:
 
     torch.set_num_threads(1)
     try:  # an error while learning is not a usage error: it propagates with its traceback
-        model, eval_env, run, work, n_envs, n_timesteps, trained, vec_env = _setup(args,
-                                                                                  command)
+        model, eval_env, run, work, n_envs, n_timesteps, trained, vec_env = _setup(args, command)
     except KeyError as e:
-        raise UsageError(f"hyper-parameter {e.args[0]!r} missing from "
-                         f"{args.conf or 'configs/hyperparams'}") from e
+        raise UsageError(
+            f"hyper-parameter {e.args[0]!r} missing from {args.conf or 'configs/hyperparams'}"
+        ) from e
     except (ValueError, TypeError, AssertionError, SyntaxError, OSError) as e:
         # bad scene, hyper-parameter (SB3 asserts its own), unreadable --conf
-        raise UsageError(f"{type(e).__name__}: {e}" if not isinstance(e, ValueError)
-                         else str(e)) from e
+        raise UsageError(
+            f"{type(e).__name__}: {e}" if not isinstance(e, ValueError) else str(e)
+        ) from e
     scene = args.scene
-    callbacks = CallbackList([
-        _eval_callback(eval_env, work, max(args.eval_freq // n_envs, 1), args.eval_episodes,
-                       on_eval, trained.tolerance),
-        _AtomicCheckpoint.make(work, max(args.checkpoint_freq, 1)),
-    ])
+    callbacks = CallbackList(
+        [
+            _eval_callback(
+                eval_env,
+                work,
+                max(args.eval_freq // n_envs, 1),
+                args.eval_episodes,
+                on_eval,
+                trained.tolerance,
+            ),
+            _AtomicCheckpoint.make(work, max(args.checkpoint_freq, 1)),
+        ]
+    )
 
     received = []
 
     def on_term(signum, frame):
         received.append(signum)
         raise KeyboardInterrupt
+
     main_thread = threading.current_thread() is threading.main_thread()
     old = signal.signal(signal.SIGTERM, on_term) if main_thread else None  # main thread only
     t0 = time.perf_counter()
     interrupted = False
     try:
-        model.learn(n_timesteps, callback=callbacks, progress_bar=not args.no_progress,
-                    tb_log_name=args.algo)
+        model.learn(
+            n_timesteps,
+            callback=callbacks,
+            progress_bar=not args.no_progress,
+            tb_log_name=args.algo,
+        )
     except KeyboardInterrupt:
         interrupted = True
     except BaseException:
         if work != run:
-            print(f"python -m agents.train: the earlier run in {str(run)!r} is kept; this "
-                  f"run's files are in {str(work)!r}", file=sys.stderr)
+            print(
+                f"python -m agents.train: the earlier run in {str(run)!r} is kept; this "
+                f"run's files are in {str(work)!r}",
+                file=sys.stderr,
+            )
         raise
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, old)
         shutil.rmtree(work / ".eval_scratch", ignore_errors=True)
     wall = time.perf_counter() - t0
-    save_model(model, model.get_vec_normalize_env(), work,
-               "checkpoint" if interrupted else "model")
+    save_model(model, model.get_vec_normalize_env(), work, "checkpoint" if interrupted else "model")
     meta = {
-        "algo": args.algo, "scene": str(scene), "scene_key": scene_key(scene),
-        "scene_digest": scene_digest(trained), "seed": args.seed,
+        "algo": args.algo,
+        "scene": str(scene),
+        "scene_key": scene_key(scene),
+        "scene_digest": scene_digest(trained),
+        "seed": args.seed,
         "env_steps": int(model.num_timesteps),
-        "wall_seconds": wall, "interrupted": interrupted, "n_envs": n_envs,
-        "rolling_drive": rolling_env.__version__, "stable_baselines3": sb3.__version__,
-        "torch": torch.__version__, "python": platform.python_version(),
+        "wall_seconds": wall,
+        "interrupted": interrupted,
+        "n_envs": n_envs,
+        "rolling_drive": rolling_env.__version__,
+        "stable_baselines3": sb3.__version__,
+        "torch": torch.__version__,
+        "python": platform.python_version(),
         "machine": f"{platform.machine()}, {os.cpu_count()} CPU cores, no GPU",
-        "commit": source_commit(), "threads": {k: os.environ.get(k) for k in THREAD_VARS},
+        "commit": source_commit(),
+        "threads": {k: os.environ.get(k) for k in THREAD_VARS},
         "vec_env": vec_env,
     }
     atomic_write(work / "meta.json", lambda p: Path(p).write_text(json.dumps(meta, indent=1)))
     print(json.dumps(meta))
     if interrupted:  # saved, but not finished: the shell convention 128 + signal number
-        raise Interrupted(128 + (received[0] if received else signal.SIGINT), work,
-                          run if work != run else None)
+        raise Interrupted(
+            128 + (received[0] if received else signal.SIGINT), work, run if work != run else None
+        )
     if work != run:
         _replace_run(run, work)
     return run
@@ -529,9 +685,11 @@ def main(argv=None):
         return 2
     except Interrupted as e:  # checkpoint saved; a scheduler must not take the run as done
         code, work, kept = e.args
-        print(f"python -m agents.train: interrupted; checkpoint.zip saved in {str(work)!r}"
-              + (f" (the earlier run in {str(kept)!r} is kept)" if kept else ""),
-              file=sys.stderr)
+        print(
+            f"python -m agents.train: interrupted; checkpoint.zip saved in {str(work)!r}"
+            + (f" (the earlier run in {str(kept)!r} is kept)" if kept else ""),
+            file=sys.stderr,
+        )
         return code
     return 0
 

@@ -2,6 +2,7 @@
 
 ``import rolling_env`` registers ``RollingDrive-v0`` with Gymnasium.
 """
+
 from __future__ import annotations
 
 import gymnasium as gym
@@ -22,9 +23,11 @@ def make(scene="default", **kwargs):
     """``gym.make("RollingDrive-v0", scene=..., **overrides)`` with the scene loaded (and
     checked) first."""
     from .scenes import load_scene
+
     sc = load_scene(scene, **{k: v for k, v in kwargs.items() if k not in _MAKE_KEYS})
     extra = {k: v for k, v in kwargs.items() if k in _MAKE_KEYS}
     from .env import check_time_limit
+
     if extra.get("max_episode_steps") is not None:
         extra["max_episode_steps"] = check_time_limit(extra["max_episode_steps"], sc)
     return gym.make("RollingDrive-v0", scene=sc, **extra)
@@ -35,4 +38,5 @@ _MAKE_KEYS = ("render_mode", "max_episode_steps", "disable_env_checker")
 
 def list_scenes():
     from .scenes import list_scenes as _ls
+
     return _ls()

@@ -12,6 +12,7 @@ process with the new physics ignores them (no race between processes).  If a num
 lacks the internals this relies on, ``drop_if_stale`` is the fallback: it deletes the
 dependent cache files when a digest stored beside them changed (not race-free).
 """
+
 from __future__ import annotations
 
 import hashlib

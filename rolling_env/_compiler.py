@@ -26,6 +26,7 @@ numba targets the host CPU, and LLVM's major version is one whose option spellin
 (11-22; measured on LLVM 22).  Anywhere else the kernels compile as numba's default pipeline
 does, only slower.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -35,8 +36,10 @@ from numba.core.compiler_lock import global_compiler_lock
 
 #: (option while our kernels compile, LLVM's default)
 LOOP_OPTIONS = (
-    ("-prefer-predicate-over-epilogue=predicate-else-scalar-epilogue",
-     "-prefer-predicate-over-epilogue=scalar-epilogue"),
+    (
+        "-prefer-predicate-over-epilogue=predicate-else-scalar-epilogue",
+        "-prefer-predicate-over-epilogue=scalar-epilogue",
+    ),
     ("-force-vector-interleave=1", "-force-vector-interleave=0"),
 )
 LLVM_MAJOR_KNOWN = (11, 22)
@@ -48,16 +51,21 @@ def options_supported(llvm_major: int, cpu_features: str, cpu_name) -> bool:
     """Whether the loop options apply: a known LLVM, AVX-512 on the host, numba targeting it
     (``cpu_name`` None: numba's ``NUMBA_CPU_NAME`` unset)."""
     feats = set(cpu_features.split(","))
-    return (LLVM_MAJOR_KNOWN[0] <= llvm_major <= LLVM_MAJOR_KNOWN[1]
-            and {"+avx512f", "+avx512vl"} <= feats and cpu_name is None)
+    return (
+        LLVM_MAJOR_KNOWN[0] <= llvm_major <= LLVM_MAJOR_KNOWN[1]
+        and {"+avx512f", "+avx512vl"} <= feats
+        and cpu_name is None
+    )
 
 
 def _supported_here() -> bool:
     try:
         import llvmlite.binding as ll
         from numba.core import config
-        return options_supported(ll.llvm_version_info[0], ll.get_host_cpu_features().flatten(),
-                                 config.CPU_NAME)
+
+        return options_supported(
+            ll.llvm_version_info[0], ll.get_host_cpu_features().flatten(), config.CPU_NAME
+        )
     except Exception:  # an llvmlite without these queries: numba's default pipeline
         return False
 
@@ -75,6 +83,7 @@ def loop_options():
         yield
         return
     import llvmlite.binding as ll
+
     with global_compiler_lock:
         if _depth == 0:
             for on, _ in LOOP_OPTIONS:

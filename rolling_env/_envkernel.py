@@ -5,6 +5,7 @@ reward in one compiled call.  The single env runs it with a batch of one, the ve
 N, so both give bit-identical transitions by construction.  Scene constants travel in ``sv``
 (indices ``S_*``); everything is SI outside ``_tick``.
 """
+
 from __future__ import annotations
 
 import math
@@ -29,8 +30,9 @@ N_SV = 36
 # repeats every period, and two transcendental calls per tick were 3% of the default step)
 
 # per-env extras written besides the observation: reward terms and info values
-X_REWARD, X_TRACK, X_WEAR, X_FINAL, X_SAT, X_U, X_V, X_N, X_T, X_SLIP, X_STICK, X_XS, X_VS = (
-    range(13))
+X_REWARD, X_TRACK, X_WEAR, X_FINAL, X_SAT, X_U, X_V, X_N, X_T, X_SLIP, X_STICK, X_XS, X_VS = range(
+    13
+)
 N_X = 13
 N_OBS = 13
 OBS_BOUND = 10.0
@@ -53,8 +55,7 @@ def _clip(x):
 
 
 @njit(**K.JIT)
-def _env_tick(e, act, sv, target, steps, W, st, p, out, obs, extra, mu, mass, load,
-              ledger):
+def _env_tick(e, act, sv, target, steps, W, st, p, out, obs, extra, mu, mass, load, ledger):
     a0 = min(max(act[e, 0], -1.0), 1.0)
     a1 = min(max(act[e, 1], -1.0), 1.0)
     a2 = min(max(act[e, 2], -1.0), 1.0)
@@ -65,15 +66,31 @@ def _env_tick(e, act, sv, target, steps, W, st, p, out, obs, extra, mu, mass, lo
     L0 = sv[S_L0]
     t0 = sv[S_T0]
     ste = st[e]
-    f = min(_travel(ste[K.ST_C] * L0, u * dt, sv[S_STROKE_R]),
-            _travel(ste[K.ST_XSPH] * L0, v * dt, sv[S_STROKE_T]))
+    f = min(
+        _travel(ste[K.ST_C] * L0, u * dt, sv[S_STROKE_R]),
+        _travel(ste[K.ST_XSPH] * L0, v * dt, sv[S_STROKE_T]),
+    )
     u *= f
     v *= f
     cb = np.cbrt(N * sv[S_HERTZ])  # Hertz: d = cb^2
     d = cb * cb
     ts = sv[S_TS]
-    K._tick(W[e], ste, p[e], d * sv[S_INV_L0], u * ts, v * ts, 0.0, mu, mass, load,
-            int(sv[S_NSUB]), sv[S_DTSUB], out[e], ledger)
+    K._tick(
+        W[e],
+        ste,
+        p[e],
+        d * sv[S_INV_L0],
+        u * ts,
+        v * ts,
+        0.0,
+        mu,
+        mass,
+        load,
+        int(sv[S_NSUB]),
+        sv[S_DTSUB],
+        out[e],
+        ledger,
+    )
     steps[e] += 1
     oe = out[e]
     xs = ste[K.ST_XS] * L0
@@ -157,8 +174,9 @@ def _env_outputs(e, steps, extra, limit, rew, trunc):
 
 
 @njit(**K.JIT)
-def env_step_serial(act, sv, target, steps, W, st, p, out, obs, extra, rew, trunc, limit, mu,
-                    mass, load, ledger):
+def env_step_serial(
+    act, sv, target, steps, W, st, p, out, obs, extra, rew, trunc, limit, mu, mass, load, ledger
+):
     """Step every env one tick.  Returns -1 (nothing stepped) when an action is out of range or
     not finite, else the number of envs left with an error (see ``_env_bad``).  Writes each
     env's reward to ``rew`` (float64) and ``steps >= limit`` to ``trunc`` (bool)."""
@@ -166,24 +184,27 @@ def env_step_serial(act, sv, target, steps, W, st, p, out, obs, extra, rew, trun
         return -1
     bad = 0
     for e in range(act.shape[0]):
-        _env_tick(e, act, sv, target, steps, W, st, p, out, obs, extra, mu, mass, load,
-                  ledger)
+        _env_tick(e, act, sv, target, steps, W, st, p, out, obs, extra, mu, mass, load, ledger)
         _env_outputs(e, steps, extra, limit, rew, trunc)
         bad += _env_bad(e, st, extra)
     return bad
 
 
-@njit(cache=True, parallel=True, error_model="numpy",  # NRT on: prange needs it
-      pipeline_class=_compiler.Compiler)
-def env_step_parallel(act, sv, target, steps, W, st, p, out, obs, extra, rew, trunc, limit,
-                      mu, mass, load, ledger):
+@njit(
+    cache=True,
+    parallel=True,
+    error_model="numpy",  # NRT on: prange needs it
+    pipeline_class=_compiler.Compiler,
+)
+def env_step_parallel(
+    act, sv, target, steps, W, st, p, out, obs, extra, rew, trunc, limit, mu, mass, load, ledger
+):
     """``env_step_serial`` with the envs spread over threads (prange)."""
     if not _actions_valid(act):
         return -1
     bad = 0
     for e in prange(act.shape[0]):
-        _env_tick(e, act, sv, target, steps, W, st, p, out, obs, extra, mu, mass, load,
-                  ledger)
+        _env_tick(e, act, sv, target, steps, W, st, p, out, obs, extra, mu, mass, load, ledger)
         _env_outputs(e, steps, extra, limit, rew, trunc)
         bad += _env_bad(e, st, extra)
     return bad
@@ -208,24 +229,50 @@ def scene_vector(scene, a_max: float, drive, scales=None) -> np.ndarray:
     v_ref = 0.3 * sc.creep_max * sc.omega_R_max
     T_stuck = 2 * a_max * sc.G_star * sc.creep_max * sc.stroke_roll
     T_ref = min(ns.mu * sc.N_max, T_stuck)
-    wear_ref = (ns.mu * sc.N_max * sc.creep_max * sc.omega_R_max * sc.dt
-                if math.isfinite(ns.mu) else 1.0)
+    wear_ref = (
+        ns.mu * sc.N_max * sc.creep_max * sc.omega_R_max * sc.dt if math.isfinite(ns.mu) else 1.0
+    )
     tpp = sc.ticks_per_period
     sv = np.zeros(N_SV + 2 * tpp)
     phase = 2.0 * np.pi * np.arange(tpp) / tpp
     sv[N_SV::2] = np.sin(phase)
-    sv[N_SV + 1::2] = np.cos(phase)
+    sv[N_SV + 1 :: 2] = np.cos(phase)
     sv[[S_N_MIN, S_N_MAX, S_UMAX, S_CREEP, S_STROKE_R, S_STROKE_T, S_R, S_E]] = (
-        sc.N_min, sc.N_max, sc.omega_R_max, sc.creep_max, sc.stroke_roll, sc.stroke_translate,
-        sc.R, sc.E_star)
+        sc.N_min,
+        sc.N_max,
+        sc.omega_R_max,
+        sc.creep_max,
+        sc.stroke_roll,
+        sc.stroke_translate,
+        sc.R,
+        sc.E_star,
+    )
     sv[[S_DT, S_L0, S_T0, S_F0, S_W0, S_TMAX, S_VREF, S_TREF, S_WREF]] = (
-        sc.dt, drive.L0, drive.t0, drive.F0, drive.W0, sc.target_max, v_ref, T_ref, wear_ref)
+        sc.dt,
+        drive.L0,
+        drive.t0,
+        drive.F0,
+        drive.W0,
+        sc.target_max,
+        v_ref,
+        T_ref,
+        wear_ref,
+    )
     sv[[S_WTRACK, S_WWEAR, S_TPP, S_EPISODE, S_NSUB]] = (
-        sc.w_track, sc.w_wear, tpp, sc.episode_steps, sc.n_sub)
-    sv[[S_HERTZ, S_TS, S_DTSUB]] = (3.0 / (4.0 * sc.E_star * math.sqrt(sc.R)),
-                                    drive.t0 / drive.L0, sc.dt / sc.n_sub / drive.t0)
-    sv[S_INV_L0:S_WFINAL] = 1.0 / sv[[S_L0, S_TMAX, S_VREF, S_STROKE_R, S_STROKE_T, S_N_MAX,
-                                      S_TREF, S_EPISODE, S_WREF]]
+        sc.w_track,
+        sc.w_wear,
+        tpp,
+        sc.episode_steps,
+        sc.n_sub,
+    )
+    sv[[S_HERTZ, S_TS, S_DTSUB]] = (
+        3.0 / (4.0 * sc.E_star * math.sqrt(sc.R)),
+        drive.t0 / drive.L0,
+        sc.dt / sc.n_sub / drive.t0,
+    )
+    sv[S_INV_L0:S_WFINAL] = (
+        1.0 / sv[[S_L0, S_TMAX, S_VREF, S_STROKE_R, S_STROKE_T, S_N_MAX, S_TREF, S_EPISODE, S_WREF]]
+    )
     sv[[S_WFINAL, S_INV_TOL]] = sc.w_final, 1.0 / sc.tolerance
     return sv
 
@@ -234,6 +281,7 @@ def _keep_cache_in_step():
     """The cache of these kernels is valid only for the current _kernel.py and _compiler.py
     (see _cachestamp)."""
     from ._cachestamp import bind_sources, drop_if_stale, sources_digest
+
     digest = sources_digest(K.__file__, __file__, _compiler.__file__)
     kernels = [f for f in globals().values() if hasattr(f, "_cache") and hasattr(f, "py_func")]
     if not bind_sources(kernels, digest):

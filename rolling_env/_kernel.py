@@ -1,4 +1,5 @@
-"""Private numba kernels of the finite-volume MDR contact (see ``rolling_env.model`` for the checked API).
+"""Private numba kernels of the finite-volume MDR contact (see ``rolling_env.model`` for the
+checked API).
 
 Discretisation
 --------------
@@ -12,7 +13,8 @@ in time; the kernel integrates the creep ODE *exactly* over each linear piece
 
 * entry (leading edge inside the cell)   ``dU/dt = s l``               (new material has uT = 0)
 * full  (cell inside the contact)        ``dU/dt = s l``
-* exit  (trailing edge inside the cell)  ``d(U/l)/dt = s``             (released material carries the mean)
+* exit  (trailing edge inside the cell)  ``d(U/l)/dt = s``             (released material
+carries the mean)
 * both  (contact narrower than a cell)   ``d(U/l)/dt = s - |u| (U/l) / l``
 
 with ``s = omega R - v - v*`` the creep rate.  Because the result is affine in ``s``, each cell
@@ -52,6 +54,7 @@ Compiler options (``JIT``, for every kernel here and in ``_envkernel``):
   2-3% of the env step); the options are set only while our kernels compile (see
   ``_compiler``).
 """
+
 from __future__ import annotations
 
 import math
@@ -71,6 +74,7 @@ def _jit_options() -> dict:
     opts = dict(cache=True, error_model="numpy", pipeline_class=Compiler)
     try:
         from numba.core.cpu import CPUTargetOptions
+
         if hasattr(CPUTargetOptions, "_nrt"):
             opts["_nrt"] = False
     except Exception:  # numba's internals moved: keep the counting
@@ -81,46 +85,46 @@ def _jit_options() -> dict:
 JIT = _jit_options()
 
 # ----------------------------------------------------------------------------- state layout
-ST_C = 0        # patch centre c (spring frame)
-ST_A = 1        # contact half-width a currently in force
-ST_D = 2        # indentation d currently in force
-ST_VS = 3       # runner velocity v*
-ST_XS = 4       # runner displacement x*
-ST_XSPH = 5     # sphere translation (integral of v dt)
-ST_T = 6        # tangential force T
-ST_IMP = 7      # cumulative impulse of T
-ST_SLIP = 8     # cumulative slip work (friction dissipation, wear measure)
-ST_REL = 9      # cumulative release work (elastic energy carried off by released material)
-ST_DRIVE = 10   # cumulative drive work  integral T (omega R - v) dt
+ST_C = 0  # patch centre c (spring frame)
+ST_A = 1  # contact half-width a currently in force
+ST_D = 2  # indentation d currently in force
+ST_VS = 3  # runner velocity v*
+ST_XS = 4  # runner displacement x*
+ST_XSPH = 5  # sphere translation (integral of v dt)
+ST_T = 6  # tangential force T
+ST_IMP = 7  # cumulative impulse of T
+ST_SLIP = 8  # cumulative slip work (friction dissipation, wear measure)
+ST_REL = 9  # cumulative release work (elastic energy carried off by released material)
+ST_DRIVE = 10  # cumulative drive work  integral T (omega R - v) dt
 ST_RUNNER = 11  # cumulative work of T on the runner  integral T v* dt
-ST_EXT = 12     # cumulative work of F_ext on the runner
-ST_TIME = 13    # time
-ST_FLAG = 14    # error flags (bit field, see FLAG_*)
-ST_ITER = 15    # cumulative Newton iterations (finite friction, free runner)
-ST_SNAP = 16    # cumulative elastic energy lost beyond the Coulomb work when springs snap to
-                # the lower friction limit of an instantaneous normal-load drop
-ST_KIN0 = 17    # runner's kinetic energy at reset: the ledger's starting balance (written by
-                # Drive.reset, read by Drive.energy; the kernel never touches it)
-ST_LEVEL = 18   # grid level k of a level grid (``P_LEVELS`` > 0): cells of dx / 2^k
+ST_EXT = 12  # cumulative work of F_ext on the runner
+ST_TIME = 13  # time
+ST_FLAG = 14  # error flags (bit field, see FLAG_*)
+ST_ITER = 15  # cumulative Newton iterations (finite friction, free runner)
+ST_SNAP = 16  # cumulative elastic energy lost beyond the Coulomb work when springs snap to
+# the lower friction limit of an instantaneous normal-load drop
+ST_KIN0 = 17  # runner's kinetic energy at reset: the ledger's starting balance (written by
+# Drive.reset, read by Drive.energy; the kernel never touches it)
+ST_LEVEL = 18  # grid level k of a level grid (``P_LEVELS`` > 0): cells of dx / 2^k
 N_STATE = 19
 
 # (omega_n dt)^2 (omega_n on the stuck contact) at which the runner step is half-way from
 # the exact (piecewise) scheme to backward Euler (``_blend``)
 THETA2_BLEND = 4.0
 
-FLAG_GRID = 1       # the contact reached the end of the spring row
+FLAG_GRID = 1  # the contact reached the end of the spring row
 FLAG_NONFINITE = 2  # a non-finite value appeared (kernel stopped)
-FLAG_SLIDE = 4      # massless runner with no force equilibrium (|F_ext| > mu N)
+FLAG_SLIDE = 4  # massless runner with no force equilibrium (|F_ext| > mu N)
 
 # per-tick outputs
-OUT_T = 0         # T at the end of the tick
-OUT_IMP = 1       # impulse of T over the tick
-OUT_VS = 2        # v* at the end of the tick
-OUT_XS = 3        # x* at the end of the tick
-OUT_SLIP = 4      # slip work during the tick
-OUT_C = 5         # patch centre at the end of the tick
-OUT_N = 6         # normal force
-OUT_STICK = 7     # stuck fraction of the contact length at the end of the tick (1 with mu = inf)
+OUT_T = 0  # T at the end of the tick
+OUT_IMP = 1  # impulse of T over the tick
+OUT_VS = 2  # v* at the end of the tick
+OUT_XS = 3  # x* at the end of the tick
+OUT_SLIP = 4  # slip work during the tick
+OUT_C = 5  # patch centre at the end of the tick
+OUT_N = 6  # normal force
+OUT_STICK = 7  # stuck fraction of the contact length at the end of the tick (1 with mu = inf)
 N_OUT = 8
 
 # rows of the cell work array W (``Drive.cells``, ``BatchCore.cells[e]``; cells along the
@@ -131,13 +135,13 @@ N_OUT = 8
 W_U, W_A, W_B, W_L = 0, 1, 2, 3
 
 # rows of the friction work array L = W[W_L:]
-L_LIMIT = 0      # friction limit mu E*/G* integral of uN over the cell's part in contact
-L_QLIM = 1       # an edge cell's friction limit per unit overlap (mu E*/G* times the mean uN
-                 # over its part in contact; 0: none in contact), the mean of its values at
-                 # the sub-step's start and end: the slip work's limit
+L_LIMIT = 0  # friction limit mu E*/G* integral of uN over the cell's part in contact
+L_QLIM = 1  # an edge cell's friction limit per unit overlap (mu E*/G* times the mean uN
+# over its part in contact; 0: none in contact), the mean of its values at
+# the sub-step's start and end: the slip work's limit
 L_U0, L_IA, L_IB = 2, 3, 4  # of an edge cell, its content at the start of the sub-step and
-                 # its unclipped integral over it, IA + IB s (the wear's trailing-edge term,
-                 # ``_edge_dissipation``, and the ledger's ``_edge_impulse``)
+# its unclipped integral over it, IA + IB s (the wear's trailing-edge term,
+# ``_edge_dissipation``, and the ledger's ``_edge_impulse``)
 N_LCOL = 5
 
 
@@ -147,12 +151,13 @@ def work_rows(finite_mu: bool, ledger: bool = True) -> int:
     which they build)."""
     return W_L + (N_LCOL if finite_mu else 0)
 
+
 # params vector
 P_R = 0
 P_E_OVER_G = 1
 P_X_LO = 2
-P_DX = 3         # cell size at level 0
-P_LEVELS = 4     # finest level of the level grid (0: a fixed grid, ``_regrid``)
+P_DX = 3  # cell size at level 0
+P_LEVELS = 4  # finest level of the level grid (0: a fixed grid, ``_regrid``)
 N_PARAM = 5
 
 
@@ -319,7 +324,7 @@ def _walk(U0, xL, xR, c0, a, u, inv_au, dt):
             else:
                 ell = 2.0 * a
                 k = au / ell
-                em1 = -math.expm1(-k * dtp)        # 1 - exp(-k dt)
+                em1 = -math.expm1(-k * dtp)  # 1 - exp(-k dt)
                 em2 = -math.expm1(-2.0 * k * dtp)  # 1 - exp(-2 k dt)
                 g = ell / k
                 # U(t) = alpha(t) + s beta(t), alpha = A e^{-kt}, beta = g + (B - g) e^{-kt}
@@ -328,8 +333,9 @@ def _walk(U0, xL, xR, c0, a, u, inv_au, dt):
                 c2 = 0.5 * au / (ell * ell)
                 e0 += c2 * A * A * em2 / (2.0 * k)
                 e1 += c2 * 2.0 * A * (g * em1 / k + (B - g) * em2 / (2.0 * k))
-                e2 += c2 * (g * g * dtp + 2.0 * g * (B - g) * em1 / k
-                            + (B - g) * (B - g) * em2 / (2.0 * k))
+                e2 += c2 * (
+                    g * g * dtp + 2.0 * g * (B - g) * em1 / k + (B - g) * (B - g) * em2 / (2.0 * k)
+                )
                 A = A * (1.0 - em1)
                 B = B * (1.0 - em1) + g * em1
         elif p < b3:
@@ -582,16 +588,25 @@ def _set_radius(W, st, p, a_new, d_new, mu, ledger):
     # cells inside the new contact (and so the old) lose nothing: only the edge cells are cut
     # (with finite friction the inner ones may still snap to their lowered limits)
     if a_new > 0.0:
-        j0, j1 = _inner_range(i0, i1, c - a_new, c + a_new, x_lo, dx, inv_dx,
-                              _inner_tol(x_lo, inv_dx, n))
+        j0, j1 = _inner_range(
+            i0, i1, c - a_new, c + a_new, x_lo, dx, inv_dx, _inner_tol(x_lo, inv_dx, n)
+        )
     else:
         j0, j1 = i1 + 1, i1
     if mu is None:
         T = st[ST_T]
         for k in _edges(i0, i1, j0, j1):
             i = _edge(k, j0, j1)
-            e_rel, dU, _ = _shrink_cell(U, i, x_lo + i * dx, dx, c, a_old, a_new,
-                                         g_lo if i == i_lo else (g_hi if i == i_hi else 0.0))
+            e_rel, dU, _ = _shrink_cell(
+                U,
+                i,
+                x_lo + i * dx,
+                dx,
+                c,
+                a_old,
+                a_new,
+                g_lo if i == i_lo else (g_hi if i == i_hi else 0.0),
+            )
             rel += e_rel
             T += dU
         if a_new <= 0.0:
@@ -604,8 +619,9 @@ def _set_radius(W, st, p, a_new, d_new, mu, ledger):
             i = _edge(k, j0, j1)
             xL = x_lo + i * dx
             xR = xL + dx
-            e_rel, _, ln = _shrink_cell(U, i, xL, dx, c, a_old, a_new,
-                                         g_lo if i == i_lo else (g_hi if i == i_hi else 0.0))
+            e_rel, _, ln = _shrink_cell(
+                U, i, xL, dx, c, a_old, a_new, g_lo if i == i_lo else (g_hi if i == i_hi else 0.0)
+            )
             rel += e_rel
             # the clip-and-slip of the tick's commit (a cell cut off entirely has Ui = Li = 0)
             Li, q = _edge_limit(xL, xR, c, a_new, d_new, inv3R, muEG)
@@ -651,7 +667,7 @@ def _clip_slope(Ut, Li, Bi):
 
 
 @njit(**JIT)
-def _solve_bracketed(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st):
+def _solve_bracketed(A, B, L, i0, i1, s0, v0, vv, mass, F, dt, st):  # noqa: C901 (safeguarded Newton: its cases are the method)
     """Safeguarded Newton/bisection for the runner velocity with finite friction.
 
     Root in v of g(v) = mass (v - v0) - dt (T(s0 - v) + F), T the sum of the clipped contents
@@ -792,8 +808,6 @@ def _inner_range(i0, i1, full_lo, full_hi, x_lo, dx, inv_dx, tol):
     return j0, j1
 
 
-
-
 @njit(**JIT)
 def _limit_sum(L, i0, i1, j0, j1):
     """Sum of the friction limits of cells i0..i1 (the inner cells j0..j1 first, then the
@@ -864,7 +878,7 @@ def _build_inner(W, j0, j1, x_lo, dx, c1, muEG, d, inv3R, dxdt, sv0, mu, mass):
     return SU, Tt0, dT0
 
 
-_DOWN = 2.0 ** -26  # _commit's count of a cell that slid down (see there)
+_DOWN = 2.0**-26  # _commit's count of a cell that slid down (see there)
 
 
 @njit(fastmath=_FM_INNER, **JIT)
@@ -1061,12 +1075,24 @@ def _limit_integral(xL, xR, c0, u, dt, a, d, inv3R, muEG):
     h = u * dt
     if abs(h) <= 1e-5 * a:
         cm = c0 + 0.5 * h
-        return muEG * dt * (_uN_integral(min(max(xR - cm, -a), a), d, inv3R)
-                            - _uN_integral(min(max(xL - cm, -a), a), d, inv3R))
+        return (
+            muEG
+            * dt
+            * (
+                _uN_integral(min(max(xR - cm, -a), a), d, inv3R)
+                - _uN_integral(min(max(xL - cm, -a), a), d, inv3R)
+            )
+        )
     c1 = c0 + h
     H = _uN_antiderivative
-    return muEG * ((H(xR - c0, a, d, inv3R) - H(xR - c1, a, d, inv3R))
-                   - (H(xL - c0, a, d, inv3R) - H(xL - c1, a, d, inv3R))) / u
+    return (
+        muEG
+        * (
+            (H(xR - c0, a, d, inv3R) - H(xR - c1, a, d, inv3R))
+            - (H(xL - c0, a, d, inv3R) - H(xL - c1, a, d, inv3R))
+        )
+        / u
+    )
 
 
 @njit(inline="always", **JIT)
@@ -1115,14 +1141,63 @@ def _phis(th2):
     a third of the cost of sqrt, sin and cos, which a light runner pays every sub-step)."""
     if th2 < 0.3:
         x = th2
-        c = 1.0 - x * (1 / 2 - x * (1 / 24 - x * (1 / 720 - x * (1 / 40320 - x * (
-            1 / 3628800 - x * (1 / 479001600 - x / 87178291200))))))
-        p1 = 1.0 - x * (1 / 6 - x * (1 / 120 - x * (1 / 5040 - x * (1 / 362880 - x * (
-            1 / 39916800 - x * (1 / 6227020800 - x / 1307674368000))))))
-        p2 = 1 / 2 - x * (1 / 24 - x * (1 / 720 - x * (1 / 40320 - x * (1 / 3628800 - x * (
-            1 / 479001600 - x * (1 / 87178291200 - x / 20922789888000))))))
-        p3 = 1 / 6 - x * (1 / 120 - x * (1 / 5040 - x * (1 / 362880 - x * (1 / 39916800 - x * (
-            1 / 6227020800 - x * (1 / 1307674368000 - x / 355687428096000))))))
+        c = 1.0 - x * (
+            1 / 2
+            - x
+            * (
+                1 / 24
+                - x
+                * (
+                    1 / 720
+                    - x * (1 / 40320 - x * (1 / 3628800 - x * (1 / 479001600 - x / 87178291200)))
+                )
+            )
+        )
+        p1 = 1.0 - x * (
+            1 / 6
+            - x
+            * (
+                1 / 120
+                - x
+                * (
+                    1 / 5040
+                    - x
+                    * (1 / 362880 - x * (1 / 39916800 - x * (1 / 6227020800 - x / 1307674368000)))
+                )
+            )
+        )
+        p2 = 1 / 2 - x * (
+            1 / 24
+            - x
+            * (
+                1 / 720
+                - x
+                * (
+                    1 / 40320
+                    - x
+                    * (
+                        1 / 3628800
+                        - x * (1 / 479001600 - x * (1 / 87178291200 - x / 20922789888000))
+                    )
+                )
+            )
+        )
+        p3 = 1 / 6 - x * (
+            1 / 120
+            - x
+            * (
+                1 / 5040
+                - x
+                * (
+                    1 / 362880
+                    - x
+                    * (
+                        1 / 39916800
+                        - x * (1 / 6227020800 - x * (1 / 1307674368000 - x / 355687428096000))
+                    )
+                )
+            )
+        )
         return c, p1, p2, p3
     th = math.sqrt(th2)
     sn = math.sin(th)
@@ -1216,7 +1291,7 @@ def _edge_dissipation(U0, Ut, Uc, Li, I_free, s, xL, xR, c0, c1, u, dt, a, d, in
 
 
 @njit(**JIT)
-def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
+def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):  # noqa: C901 (the compiled tick, one inlined body)
     """Advance one control tick of n_sub sub-steps with piecewise-constant inputs.
 
     d: indentation, u: omega R (signed), v: sphere translation rate (signed),
@@ -1319,8 +1394,7 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
             j1 = i1
         n_in = j1 - j0 + 1
         # ------------------------------------------------ build: inner cells (A = U, B = dx dt)
-        SU, Tt0, dT0 = _build_inner(W, j0, j1, x_lo, dx, c1, muEG, d, inv3R, dxdt, sv0,
-                                    mu, mass)
+        SU, Tt0, dT0 = _build_inner(W, j0, j1, x_lo, dx, c1, muEG, d, inv3R, dxdt, sv0, mu, mass)
         if n_in > 0:
             SA += SU
             SB += n_in * dxdt
@@ -1428,8 +1502,7 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                 lam = _blend(SB * dt / mass, tr2)
                 f1 = 0.0
                 if lam > 0.0:
-                    vref, v1l, f1 = _runner_linear(mass, dT0 / dt, T1, Tt0 + dT0 * v0, F, v0,
-                                                   dt)
+                    vref, v1l, f1 = _runner_linear(mass, dT0 / dt, T1, Tt0 + dT0 * v0, F, v0, dt)
                 # exact on the piece, the force beyond it a trapezoid over the sub-step (h =
                 # dt / 2), where the runner's period on the stuck contact is resolved; where
                 # it is not (th2 = (omega_n dt)^2 large) blended into backward Euler (vref =
@@ -1449,7 +1522,7 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                     # sphere's creep velocity, the limit of a vanishing contact)
                     fast = False
                     st[ST_ITER] = iters
-                    B[j0:j1 + 1] = dxdt
+                    B[j0 : j1 + 1] = dxdt
                     vb = _solve_bracketed(A, B, L, i0, i1, s0, v0, v0, mass, F, h, st)
                     iters = st[ST_ITER]
                 elif g0 != 0.0:
@@ -1474,8 +1547,9 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
             clipped = False
             T1_in = 0.0  # with the ledger and friction: T of the inner cells at the end
             if ledger is None and mu is not None:
-                T1, Ta, slip, _ns, _nk, _nh = _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu,
-                                                      mass, True, None, drift)
+                T1, Ta, slip, _ns, _nk, _nh = _commit(
+                    W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass, True, None, drift
+                )
                 edge_cells = _cells(0, 0)  # committed too: none left for the scalar loop
                 if a > 0.0 and u != 0.0:
                     # the trailing edge cells' slip work is their dissipation
@@ -1488,24 +1562,43 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                         Ut0 = A[i] + B[i] * s
                         Li = L[L_LIMIT, i]
                         _u, work, _o = _slide(Ut0, Li, L[L_QLIM, i])
-                        slip += _edge_dissipation(L[L_U0, i], Ut0, U[i], Li,
-                                                  L[L_IA, i] + L[L_IB, i] * s, s, xL, xL + dx,
-                                                  c0, c1, u, dt, a, d, inv3R, muEG) - work
+                        slip += (
+                            _edge_dissipation(
+                                L[L_U0, i],
+                                Ut0,
+                                U[i],
+                                Li,
+                                L[L_IA, i] + L[L_IB, i] * s,
+                                s,
+                                xL,
+                                xL + dx,
+                                c0,
+                                c1,
+                                u,
+                                dt,
+                                a,
+                                d,
+                                inv3R,
+                                muEG,
+                            )
+                            - work
+                        )
             elif ledger is not None and mu is not None:
                 T1, Ta, slip, n_slid, n_kinks, n_held = _commit(
-                    W, j0, j1, j0, j1, dxdt, s, inv_dx, mu, mass, None, True, drift)
+                    W, j0, j1, j0, j1, dxdt, s, inv_dx, mu, mass, None, True, drift
+                )
                 clipped = n_slid > 0
                 if n_kinks > 0:
-                    dimp, n_bent = _impulse_fix(W, j0, j1, x_lo, dx, c0, muEG, d, inv3R,
-                                                dxdt, s)
+                    dimp, n_bent = _impulse_fix(W, j0, j1, x_lo, dx, c0, muEG, d, inv3R, dxdt, s)
                     n_held -= n_bent
                 # the inner cells that stayed at their limit follow it, a quadratic in time
                 # whose curvature (-2 muEG dx u^2 / R for the +limit) the trapezoid misses
                 dimp += n_held * (muEG * dx * inv3R * 0.5) * (u * dt) * (u * dt)
                 T1_in = T1
             else:
-                T1, Ta, slip, _ns, _nk, _nh = _commit(W, j0, j1, j0, j1, dxdt, s, inv_dx, mu,
-                                                      mass, None, None, drift)
+                T1, Ta, slip, _ns, _nk, _nh = _commit(
+                    W, j0, j1, j0, j1, dxdt, s, inv_dx, mu, mass, None, None, drift
+                )
             for k in edge_cells:
                 i = _edge(k, j0, j1)
                 Ut = A[i] + B[i] * s
@@ -1515,9 +1608,24 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                     clipped |= over
                     if a > 0.0 and u != 0.0 and _trailing(i, j0, u):
                         xL = x_lo + i * dx
-                        slip += _edge_dissipation(L[L_U0, i], Ut0, Ut, L[L_LIMIT, i],
-                                                  L[L_IA, i] + L[L_IB, i] * s, s, xL, xL + dx,
-                                                  c0, c1, u, dt, a, d, inv3R, muEG)
+                        slip += _edge_dissipation(
+                            L[L_U0, i],
+                            Ut0,
+                            Ut,
+                            L[L_LIMIT, i],
+                            L[L_IA, i] + L[L_IB, i] * s,
+                            s,
+                            xL,
+                            xL + dx,
+                            c0,
+                            c1,
+                            u,
+                            dt,
+                            a,
+                            d,
+                            inv3R,
+                            muEG,
+                        )
                     else:
                         slip += work
                     if mass is not None:
@@ -1533,7 +1641,7 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                 break
             fast = False
             st[ST_ITER] = iters
-            B[j0:j1 + 1] = dxdt
+            B[j0 : j1 + 1] = dxdt
             vb = _solve_runner(A, B, L, i0, i1, s0, vref, vb, mass, Fs, h, st)
             iters = st[ST_ITER]
         if mu is not None and mass is not None:
@@ -1554,9 +1662,22 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                     for k in _edges(i0, i1, j0, j1):
                         i = _edge(k, j0, j1)
                         xL = x_lo + i * dx
-                        imp_edge += _edge_impulse(L[L_U0, i], A[i] + B[i] * s, L[L_LIMIT, i],
-                                                  L[L_IA, i] + L[L_IB, i] * s, s, xL, xL + dx,
-                                                  c0, u, dt, a, d, inv3R, muEG)
+                        imp_edge += _edge_impulse(
+                            L[L_U0, i],
+                            A[i] + B[i] * s,
+                            L[L_LIMIT, i],
+                            L[L_IA, i] + L[L_IB, i] * s,
+                            s,
+                            xL,
+                            xL + dx,
+                            c0,
+                            u,
+                            dt,
+                            a,
+                            d,
+                            inv3R,
+                            muEG,
+                        )
                 # some cells slid (finite friction).  Inner cells: the trapezoid, exact for a
                 # cell that sticks (its content is linear in time) and, with the curvature
                 # term, for one at its limit all through; plus for each inner cell whose path
@@ -1578,8 +1699,9 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
                 # (the piece's linear force ramp misses the limits' motion: 1% of the drive
                 # work at one cell per sub-step)
                 imp = lam * (mass * (v1 - v0) - F * dt) + (1.0 - lam) * imp
-                work_r = (lam * (0.5 * mass * (v1 - v0) * (v1 + v0) - F * vb * dt)
-                          + (1.0 - lam) * work_r)
+                work_r = (
+                    lam * (0.5 * mass * (v1 - v0) * (v1 + v0) - F * vb * dt) + (1.0 - lam) * work_r
+                )
             st[ST_IMP] += imp
             if mu is None:
                 st[ST_REL] += E0 + s * (E1 + s * E2)
@@ -1610,8 +1732,9 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger):
         out[OUT_STICK] = 1.0 if a > 0.0 else 0.0
     else:
         out[OUT_STICK] = min(stuck / (2.0 * a), 1.0)
-    if not (math.isfinite(T1) and math.isfinite(v1) and math.isfinite(xs)
-            and math.isfinite(slip_tick)):
+    if not (
+        math.isfinite(T1) and math.isfinite(v1) and math.isfinite(xs) and math.isfinite(slip_tick)
+    ):
         st[ST_FLAG] = int(st[ST_FLAG]) | FLAG_NONFINITE
 
 

@@ -24,6 +24,7 @@ the uncertainty column says where a larger K is needed.
 The shipped sub-steps and resolution are read from the built env, never from the scene file
 (a scene may resolve them when it is built); every level passes both explicitly.
 """
+
 from __future__ import annotations
 
 import math
@@ -32,10 +33,10 @@ import time
 
 import numpy as np
 
-ORDER = 2.0           # assumed order of the error in the refinement factor (Richardson)
-DEFAULT_REFINE = 8    # K: sub-steps x K and x 2K at the two reference levels
-DEFAULT_GRID = 4      # G: the grid (resolution) x G and x 2G at the two reference levels
-TIMING_REPEATS = 3    # the shipped replay is timed this often; the fastest run counts
+ORDER = 2.0  # assumed order of the error in the refinement factor (Richardson)
+DEFAULT_REFINE = 8  # K: sub-steps x K and x 2K at the two reference levels
+DEFAULT_GRID = 4  # G: the grid (resolution) x G and x 2G at the two reference levels
+TIMING_REPEATS = 3  # the shipped replay is timed this often; the fastest run counts
 KINDS = ("eq32-feedback", "eq32-open-loop", "random")
 
 
@@ -45,8 +46,9 @@ def shipped_numerics(env) -> tuple[int, float]:
     return int(sc.n_sub), float(sc.resolution)
 
 
-def levels(refine: int = DEFAULT_REFINE, grid: int = DEFAULT_GRID
-           ) -> tuple[tuple[int, int], tuple[int, int]]:
+def levels(
+    refine: int = DEFAULT_REFINE, grid: int = DEFAULT_GRID
+) -> tuple[tuple[int, int], tuple[int, int]]:
     """The reference levels as (sub-step factor, grid factor) pairs over the shipped
     settings: (K, G) and (2K, 2G)."""
     for name, k in (("refine", refine), ("grid", grid)):
@@ -57,6 +59,7 @@ def levels(refine: int = DEFAULT_REFINE, grid: int = DEFAULT_GRID
 
 def _make(scene, sub_steps=None, resolution=None, overrides=None):
     import rolling_env
+
     kw = dict(overrides or {})
     if sub_steps is not None:
         kw.update(sub_steps=int(sub_steps), resolution=float(resolution))
@@ -76,9 +79,11 @@ def check_levels(scene, level_factors, overrides=None) -> list[tuple[int, float]
         try:
             _make(scene, s, r, overrides).close()
         except ValueError as e:
-            raise ValueError(f"the reference level with sub_steps {s} and resolution {r:g} "
-                             f"(x{fs} and x{fg:g} the shipped {s0} and {r0:g}) cannot be "
-                             f"built: {e}") from None
+            raise ValueError(
+                f"the reference level with sub_steps {s} and resolution {r:g} "
+                f"(x{fs} and x{fg:g} the shipped {s0} and {r0:g}) cannot be "
+                f"built: {e}"
+            ) from None
         out.append((s, r))
     return out
 
@@ -87,6 +92,7 @@ def check_scene(scene, overrides=None) -> None:
     """Build the scene's env and both Eq. 32 baselines, so that a scene that does not load, or
     that the baselines cannot drive, is refused before any episode runs."""
     from agents.baselines import Eq32Feedback, Eq32OpenLoop
+
     env = _make(scene, overrides=overrides)
     try:
         Eq32Feedback.from_env(env)
@@ -108,14 +114,16 @@ class _Sequence:
         return a, state
 
 
-def record(scene, kind: str, seed: int = 0, actions: np.ndarray | None = None,
-           overrides=None) -> dict:
+def record(
+    scene, kind: str, seed: int = 0, actions: np.ndarray | None = None, overrides=None
+) -> dict:
     """One episode of ``kind`` at the shipped settings: its actions (float32, as the
     controllers give them), final x* [m], total slip work [J] and target [m].  ``random``
     plays ``actions`` (pre-sampled)."""
     from agents.baselines import Eq32Feedback, Eq32OpenLoop
 
     from .rollout import rollout
+
     env = _make(scene, overrides=overrides)
     if kind == "eq32-feedback":
         ctrl = Eq32Feedback.from_env(env)
@@ -128,12 +136,23 @@ def record(scene, kind: str, seed: int = 0, actions: np.ndarray | None = None,
     data = rollout(env, ctrl, seed=seed)
     env.close()
     acts = np.stack([data["a_force"], data["a_roll"], data["a_creep"]], axis=1)
-    return {"actions": acts.astype(np.float32), "xstar": float(data["xstar"][-1]),
-            "slip_work": data["total_slip_work"], "target": float(data["target"][-1])}
+    return {
+        "actions": acts.astype(np.float32),
+        "xstar": float(data["xstar"][-1]),
+        "slip_work": data["total_slip_work"],
+        "target": float(data["target"][-1]),
+    }
 
 
-def replay(scene, actions: np.ndarray, seed: int = 0, sub_steps=None, resolution=None,
-           overrides=None, repeats: int = 1) -> dict:
+def replay(
+    scene,
+    actions: np.ndarray,
+    seed: int = 0,
+    sub_steps=None,
+    resolution=None,
+    overrides=None,
+    repeats: int = 1,
+) -> dict:
     """Replay ``actions`` open loop (a fresh env per run, reset with ``seed``) at
     ``sub_steps`` and ``resolution`` (None: the shipped ones).  Returns the final x* [m], the
     total slip work [J] and the fastest of ``repeats`` step loops in seconds and steps/s."""
@@ -152,11 +171,16 @@ def replay(scene, actions: np.ndarray, seed: int = 0, sub_steps=None, resolution
         env.close()
         s = float(np.sum(work))  # summed as rollout sums it: a faithful replay is bit-equal
         if xstar is not None and (info["xstar"] != xstar or s != slip):
-            raise RuntimeError("the env is not deterministic: two replays of one action "
-                               "sequence differ")
+            raise RuntimeError(
+                "the env is not deterministic: two replays of one action sequence differ"
+            )
         xstar, slip = info["xstar"], s
-    return {"xstar": float(xstar), "slip_work": float(slip), "seconds": best,
-            "steps_per_s": len(actions) / best if best > 0 else math.inf}
+    return {
+        "xstar": float(xstar),
+        "slip_work": float(slip),
+        "seconds": best,
+        "steps_per_s": len(actions) / best if best > 0 else math.inf,
+    }
 
 
 def richardson(coarse: float, fine: float, ratio: float, order: float = ORDER) -> float:
@@ -164,7 +188,7 @@ def richardson(coarse: float, fine: float, ratio: float, order: float = ORDER) -
     ~ h^order; with ``ratio`` 1 the two levels are the same and ``fine`` is returned."""
     if ratio == 1.0 or coarse == fine:
         return fine
-    return fine + (fine - coarse) / (ratio ** order - 1.0)
+    return fine + (fine - coarse) / (ratio**order - 1.0)
 
 
 def _level_ratio(level_factors) -> float:
@@ -172,8 +196,10 @@ def _level_ratio(level_factors) -> float:
     (s1, g1), (s2, g2) = level_factors
     rs, rg = s2 / s1, g2 / g1
     if not (rs >= 1.0 and math.isclose(rs, rg)):
-        raise ValueError(f"the two reference levels must refine the sub-steps and the grid by "
-                         f"one common factor >= 1, got x{rs:g} and x{rg:g}")
+        raise ValueError(
+            f"the two reference levels must refine the sub-steps and the grid by "
+            f"one common factor >= 1, got x{rs:g} and x{rg:g}"
+        )
     return rs
 
 
@@ -181,8 +207,16 @@ def _rel_pct(value: float, ref: float) -> float | None:
     return None if ref == 0.0 else (value - ref) / abs(ref) * 100.0
 
 
-def episode_result(kind: str, label: str, rec: dict, shipped: dict, refs: list[dict],
-                   ratio: float, order: float, tolerance: float) -> dict:
+def episode_result(
+    kind: str,
+    label: str,
+    rec: dict,
+    shipped: dict,
+    refs: list[dict],
+    ratio: float,
+    order: float,
+    tolerance: float,
+) -> dict:
     """The accuracy of one episode: errors of the shipped replay against the extrapolated
     reference, the reference's uncertainty (difference of its two levels) and the speeds."""
     (c, f) = refs
@@ -190,25 +224,39 @@ def episode_result(kind: str, label: str, rec: dict, shipped: dict, refs: list[d
     s_ref = richardson(c["slip_work"], f["slip_work"], ratio, order)
     slip_unc = None if s_ref == 0.0 else abs(f["slip_work"] - c["slip_work"]) / abs(s_ref) * 100
     return {
-        "kind": kind, "label": label, "steps": len(rec["actions"]), "target": rec["target"],
-        "replay_exact": (shipped["xstar"], shipped["slip_work"]) == (rec["xstar"],
-                                                                     rec["slip_work"]),
-        "xstar_shipped": shipped["xstar"], "xstar_reference": x_ref,
+        "kind": kind,
+        "label": label,
+        "steps": len(rec["actions"]),
+        "target": rec["target"],
+        "replay_exact": (shipped["xstar"], shipped["slip_work"])
+        == (rec["xstar"], rec["slip_work"]),
+        "xstar_shipped": shipped["xstar"],
+        "xstar_reference": x_ref,
         "xstar_error_tol": abs(shipped["xstar"] - x_ref) / tolerance,
         "xstar_uncertainty_tol": abs(f["xstar"] - c["xstar"]) / tolerance,
-        "slip_work_shipped": shipped["slip_work"], "slip_work_reference": s_ref,
+        "slip_work_shipped": shipped["slip_work"],
+        "slip_work_reference": s_ref,
         "slip_error_pct": _rel_pct(shipped["slip_work"], s_ref),
         "slip_uncertainty_pct": slip_unc,
         "steps_per_s": shipped["steps_per_s"],
-        "levels": [{"xstar": r["xstar"], "slip_work": r["slip_work"],
-                    "steps_per_s": r["steps_per_s"]} for r in refs],
+        "levels": [
+            {"xstar": r["xstar"], "slip_work": r["slip_work"], "steps_per_s": r["steps_per_s"]}
+            for r in refs
+        ],
     }
 
 
-def scene_accuracy(scene, refine: int = DEFAULT_REFINE, grid: int = DEFAULT_GRID,
-                   episodes_random: int = 1, seed: int = 0, overrides: dict | None = None,
-                   level_factors=None, order: float = ORDER,
-                   timing_repeats: int = TIMING_REPEATS) -> dict:
+def scene_accuracy(
+    scene,
+    refine: int = DEFAULT_REFINE,
+    grid: int = DEFAULT_GRID,
+    episodes_random: int = 1,
+    seed: int = 0,
+    overrides: dict | None = None,
+    level_factors=None,
+    order: float = ORDER,
+    timing_repeats: int = TIMING_REPEATS,
+) -> dict:
     """The accuracy table of one scene (name, YAML path or dict; see the module docstring).
 
     ``overrides`` apply to every env built (the shipped one and the references), e.g.
@@ -235,16 +283,19 @@ def scene_accuracy(scene, refine: int = DEFAULT_REFINE, grid: int = DEFAULT_GRID
     episodes = []
     for kind, label, acts in plan:
         rec = record(scene, kind, seed, acts, overrides)
-        shipped = replay(scene, rec["actions"], seed, overrides=overrides,
-                         repeats=timing_repeats)
+        shipped = replay(scene, rec["actions"], seed, overrides=overrides, repeats=timing_repeats)
         refs = [replay(scene, rec["actions"], seed, s, r, overrides) for s, r in abs_levels]
-        episodes.append(episode_result(kind, label, rec, shipped, refs, ratio, order,
-                                       sc.tolerance))
+        episodes.append(episode_result(kind, label, rec, shipped, refs, ratio, order, sc.tolerance))
     return {
-        "scene": sc.name, "tolerance": sc.tolerance, "episode_steps": steps, "seed": seed,
+        "scene": sc.name,
+        "tolerance": sc.tolerance,
+        "episode_steps": steps,
+        "seed": seed,
         "shipped": {"sub_steps": s0, "resolution": r0},
         "levels": [{"sub_steps": s, "resolution": r} for s, r in abs_levels],
-        "order": order, "ratio": ratio, "episodes": episodes,
+        "order": order,
+        "ratio": ratio,
+        "episodes": episodes,
         "seconds": time.perf_counter() - t_start,
     }
 
@@ -263,25 +314,30 @@ def _f(x, fmt: str, unit: str = "", width: int = 0) -> str:
 
 
 def _unc(e: dict) -> str:
-    return (f"{e['xstar_uncertainty_tol']:.3g} tol, "
-            f"{_f(e['slip_uncertainty_pct'], '.2g', '%')}")
+    return f"{e['xstar_uncertainty_tol']:.3g} tol, {_f(e['slip_uncertainty_pct'], '.2g', '%')}"
 
 
 def table(res: dict) -> str:
     """The human table of one scene's result."""
     lv = ", ".join(f"({lev['sub_steps']}, {lev['resolution']:g})" for lev in res["levels"])
-    head = (f"{res['scene']}: shipped sub_steps {res['shipped']['sub_steps']}, resolution "
-            f"{res['shipped']['resolution']:g}; reference Richardson (order {res['order']:g}) "
-            f"of (sub_steps, resolution) = {lv}; tolerance {res['tolerance']:g} m, "
-            f"{res['episode_steps']} steps, seed {res['seed']}")
-    lines = [head,
-             f"  {'episode':16s} {'x* error':>12s} {'slip error':>11s} {'steps/s':>9s}"
-             f"   reference uncertainty (x*, slip)",
-             f"  {'':16s} {'[tol]':>12s} {'[%]':>11s}"]
+    head = (
+        f"{res['scene']}: shipped sub_steps {res['shipped']['sub_steps']}, resolution "
+        f"{res['shipped']['resolution']:g}; reference Richardson (order {res['order']:g}) "
+        f"of (sub_steps, resolution) = {lv}; tolerance {res['tolerance']:g} m, "
+        f"{res['episode_steps']} steps, seed {res['seed']}"
+    )
+    lines = [
+        head,
+        f"  {'episode':16s} {'x* error':>12s} {'slip error':>11s} {'steps/s':>9s}"
+        f"   reference uncertainty (x*, slip)",
+        f"  {'':16s} {'[tol]':>12s} {'[%]':>11s}",
+    ]
     for e in res["episodes"]:
-        lines.append(f"  {e['label']:16s} {e['xstar_error_tol']:12.4g} "
-                     f"{_f(e['slip_error_pct'], '+.2f', width=11)} {e['steps_per_s']:9.0f}"
-                     f"   {_unc(e)}")
+        lines.append(
+            f"  {e['label']:16s} {e['xstar_error_tol']:12.4g} "
+            f"{_f(e['slip_error_pct'], '+.2f', width=11)} {e['steps_per_s']:9.0f}"
+            f"   {_unc(e)}"
+        )
     if not all(e["replay_exact"] for e in res["episodes"]):
         lines.append("  WARNING: a replay at the shipped settings differs from its recording")
     lines.append(f"  [{res['seconds']:.1f} s]")
@@ -291,7 +347,8 @@ def table(res: dict) -> str:
 def report(results: list[dict], command: str, seconds: float) -> str:
     """Markdown report of one or more scenes' results."""
     lines = [
-        "# Accuracy of the env at the shipped settings, against a refined reference", "",
+        "# Accuracy of the env at the shipped settings, against a refined reference",
+        "",
         f"Generated by `{command}` ({seconds:.0f} s on a machine with {os.cpu_count()} CPUs; "
         "see `docs/accuracy.md` for the method).  Per scene, each episode's actions are "
         "recorded at the scene's shipped settings and replayed open loop there and at two "
@@ -303,19 +360,24 @@ def report(results: list[dict], command: str, seconds: float) -> str:
         "reference, negative = the shipped env underestimates the wear, `-` where the "
         "reference has no slip work (infinite friction).  *steps/s*: one env's step loop at "
         "the shipped settings (`rolling_env.make`, pre-recorded actions, fastest of "
-        f"{TIMING_REPEATS}); the reference levels' speeds follow.", ""]
+        f"{TIMING_REPEATS}); the reference levels' speeds follow.",
+        "",
+    ]
     for res in results:
         lv = [f"({lev['sub_steps']}, {lev['resolution']:g})" for lev in res["levels"]]
         lines += [
-            f"## {res['scene']}", "",
+            f"## {res['scene']}",
+            "",
             f"Shipped: {res['shipped']['sub_steps']} sub-steps per tick, "
             f"{res['shipped']['resolution']:g} cells per contact radius; reference levels "
             f"{' and '.join(lv)}; tolerance {res['tolerance']:g} m; {res['episode_steps']} "
-            f"steps per episode, seed {res['seed']}; {res['seconds']:.1f} s.", "",
+            f"steps per episode, seed {res['seed']}; {res['seconds']:.1f} s.",
+            "",
             "| episode | x* error [tol] | x* uncertainty [tol] | slip error | slip "
             "uncertainty | x* shipped [m] | x* reference [m] | slip work reference [J] | "
             "steps/s shipped | steps/s " + " | steps/s ".join(lv) + " |",
-            "|---|---|---|---|---|---|---|---|---|" + "---|" * len(lv)]
+            "|---|---|---|---|---|---|---|---|---|" + "---|" * len(lv),
+        ]
         for e in res["episodes"]:
             speeds = " | ".join(f"{lev['steps_per_s']:.0f}" for lev in e["levels"])
             lines.append(
@@ -323,9 +385,13 @@ def report(results: list[dict], command: str, seconds: float) -> str:
                 f"{e['xstar_uncertainty_tol']:.2g} | {_f(e['slip_error_pct'], '+.1f', '%')} | "
                 f"{_f(e['slip_uncertainty_pct'], '.2g', '%')} | "
                 f"{e['xstar_shipped']:.5e} | {e['xstar_reference']:.5e} | "
-                f"{e['slip_work_reference']:.4e} | {e['steps_per_s']:.0f} | {speeds} |")
+                f"{e['slip_work_reference']:.4e} | {e['steps_per_s']:.0f} | {speeds} |"
+            )
         if not all(e["replay_exact"] for e in res["episodes"]):
-            lines += ["", "**Warning**: a replay at the shipped settings differs from its "
-                      "recording (the env is not deterministic)."]
+            lines += [
+                "",
+                "**Warning**: a replay at the shipped settings differs from its "
+                "recording (the env is not deterministic).",
+            ]
         lines.append("")
     return "\n".join(lines)

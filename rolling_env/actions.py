@@ -4,6 +4,7 @@ a0 -> normal force  N = N_min + (a0 + 1)/2 (N_max - N_min)            [N]
 a1 -> rolling rate  omega R = a1 omega_R_max                          [m/s], signed
 a2 -> creep         v = omega R (1 - a2 creep_max), i.e. 1 - v/(omega R) = a2 creep_max
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -26,7 +27,9 @@ def from_controls(scene, N, omega_R, creep):
     a2 = creep / scene.creep_max
     a = np.array([a0, a1, a2], dtype=np.float64)
     if np.any(np.abs(a) > 1.0 + 1e-9):
-        raise ValueError(f"controls (N={N}, omega_R={omega_R}, creep={creep}) lie outside the "
-                         f"scene's ranges N in [{scene.N_min}, {scene.N_max}], |omega R| <= "
-                         f"{scene.omega_R_max}, |creep| <= {scene.creep_max}")
+        raise ValueError(
+            f"controls (N={N}, omega_R={omega_R}, creep={creep}) lie outside the "
+            f"scene's ranges N in [{scene.N_min}, {scene.N_max}], |omega R| <= "
+            f"{scene.omega_R_max}, |creep| <= {scene.creep_max}"
+        )
     return np.clip(a, -1.0, 1.0).astype(np.float32)

@@ -7,6 +7,7 @@ takes scalars or numpy arrays (broadcast), returns a float for scalar input and 
 otherwise, and rejects out-of-range input (NaN and inf included) with a ``ValueError`` that
 names the parameter and its allowed range.
 """
+
 from __future__ import annotations
 
 import math
@@ -68,8 +69,9 @@ def _finite(name, a, positive=False):
     if ok:
         return _out(a)
     if positive:
-        raise ValueError(f"{name} leaves the float range for this input (inputs too large or "
-                         "too small)")
+        raise ValueError(
+            f"{name} leaves the float range for this input (inputs too large or too small)"
+        )
     raise ValueError(f"{name} overflows the float range for this input (inputs too large)")
 
 
@@ -83,6 +85,7 @@ def _together(fn):
     the formula."""
     import functools
     import inspect
+
     names = list(inspect.signature(fn).parameters)
 
     @functools.wraps(fn)
@@ -99,9 +102,12 @@ def _together(fn):
             np.broadcast_shapes(*shapes.values())
         except ValueError:
             given = ", ".join(f"{k} {v}" for k, v in shapes.items() if v != ())
-            raise ValueError(f"{fn.__name__}: the parameters must broadcast together (numpy's "
-                             f"rules), got shapes {given}") from None
+            raise ValueError(
+                f"{fn.__name__}: the parameters must broadcast together (numpy's "
+                f"rules), got shapes {given}"
+            ) from None
         return fn(*args, **kwargs)
+
     return checked
 
 
@@ -116,7 +122,7 @@ def effective_moduli(E1, nu1, E2, nu2):
     nu1, nu2 = _arr("nu1", nu1, 0, 0.5), _arr("nu2", nu2, 0, 0.5)
     with np.errstate(over="ignore", divide="ignore"):
         G1, G2 = E1 / (2 * (1 + nu1)), E2 / (2 * (1 + nu2))
-        E_star = 1 / ((1 - nu1 ** 2) / E1 + (1 - nu2 ** 2) / E2)
+        E_star = 1 / ((1 - nu1**2) / E1 + (1 - nu2**2) / E2)
         G_star = 1 / ((2 - nu1) / (4 * G1) + (2 - nu2) / (4 * G2))
     return _finite("E_star", E_star, positive=True), _finite("G_star", G_star, positive=True)
 
@@ -146,7 +152,7 @@ def hertz_force(d, R, E_star):
     d = _arr("d", d, 0)
     R, E_star = _pos("R", R), _pos("E_star", E_star)
     with np.errstate(over="ignore"):
-        N = 4 / 3 * E_star * np.sqrt(R) * d ** 1.5
+        N = 4 / 3 * E_star * np.sqrt(R) * d**1.5
     return _finite("the normal force N", N)
 
 
@@ -186,7 +192,7 @@ def steady_forces(delta, eps, vstar_ratio, a1, G_star):
     V = _arr("vstar_ratio", vstar_ratio)
     G_star, a1 = _pos("G_star", G_star), _arr("a1", a1, 0)
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is _finite's error
-        scale = 2 * G_star * a1 ** 2
+        scale = 2 * G_star * a1**2
         T1, T2 = scale * (1 - eps - V), scale * delta * (-1 + eps - V)
     return _finite("T1", T1), _finite("T2", T2)
 
@@ -222,11 +228,13 @@ def impulse_coefficients(delta, w):
     delta, w = _arr("delta", delta, 0, 1), _w(w)
     low = w < 1 + np.sqrt(delta)
     if np.any(low):
-        raise ValueError(f"w must be >= 1 + sqrt(delta), got w = {_first(w, low)!r} at "
-                         f"delta = {_first(delta, low)!r}: below, some springs never release "
-                         "and the formula does not apply")
+        raise ValueError(
+            f"w must be >= 1 + sqrt(delta), got w = {_first(w, low)!r} at "
+            f"delta = {_first(delta, low)!r}: below, some springs never release "
+            "and the formula does not apply"
+        )
     k = np.maximum(2 - w, 0.0) ** 3 / 6
-    P = 2 * w * (1 - delta) - 4 / 3 * (1 - delta ** 1.5) + k
+    P = 2 * w * (1 - delta) - 4 / 3 * (1 - delta**1.5) + k
     Q = 2 * w * (1 + delta) - 4 / 3 + 4 * delta + k
     return _out(P), _out(Q)
 
@@ -240,10 +248,12 @@ def eq32(delta, eps, w):
     1 + sqrt(delta) <= w < 2."""
     delta, eps, w = _arr("delta", delta, 0, 1), _arr("eps", eps), _w(w)
     if np.any(w < 2):
-        raise ValueError(f"w must be >= 2 for Eq. 32 (the paper's assumption), got "
-                         f"{_first(w, w < 2)!r}; working_point_ratio covers "
-                         "1 + sqrt(delta) <= w < 2")
-    num = 4 / 3 * (1 - delta ** 1.5) / w - 2 * (1 - delta)  # both over w: no overflow
+        raise ValueError(
+            f"w must be >= 2 for Eq. 32 (the paper's assumption), got "
+            f"{_first(w, w < 2)!r}; working_point_ratio covers "
+            "1 + sqrt(delta) <= w < 2"
+        )
+    num = 4 / 3 * (1 - delta**1.5) / w - 2 * (1 - delta)  # both over w: no overflow
     den = (4 / 3 - 4 * delta) / w - 2 * (1 + delta)
     return _finite("Eq. 32's v*/(omega R)", (1 - eps) * num / den)
 
@@ -257,8 +267,9 @@ def working_point_ratio(delta, eps, w):
     eps = _arr("eps", eps)
     P, Q = impulse_coefficients(delta, w)
     w = np.asarray(w, dtype=np.float64)
-    return _finite("the working point v*/(omega R)",
-                   (1 - eps) * (np.asarray(P) / w) / (np.asarray(Q) / w))
+    return _finite(
+        "the working point v*/(omega R)", (1 - eps) * (np.asarray(P) / w) / (np.asarray(Q) / w)
+    )
 
 
 def _cubic_root_b(r, w):
@@ -275,7 +286,7 @@ def _cubic_root_b(r, w):
     for _ in range(2):  # Newton polish to full precision (the root is simple for r < 1)
         fp = b * (2 * c2 + 3 * c3 * b)
         if fp > 0:
-            b = float(np.clip(b - (c3 * b ** 3 + c2 * b ** 2 + c0) / fp, 0.0, 1.0))
+            b = float(np.clip(b - (c3 * b**3 + c2 * b**2 + c0) / fp, 0.0, 1.0))
     return b
 
 
@@ -292,11 +303,13 @@ def invert_eq32_delta(ratio, eps, w):
     if np.any(bad):
         e = _first(eps, bad)
         lo, hi = sorted((0.0, 1 - e))
-        raise ValueError(f"ratio must be in the reachable range [{lo:g}, {hi:g}] (eps = {e!r}), "
-                         f"got {_first(ratio, bad)!r}")
+        raise ValueError(
+            f"ratio must be in the reachable range [{lo:g}, {hi:g}] (eps = {e!r}), "
+            f"got {_first(ratio, bad)!r}"
+        )
     rb, wb = np.broadcast_arrays(np.clip(r, 0.0, 1.0), w)
     b = np.array([_cubic_root_b(rr, ww) for rr, ww in zip(rb.ravel(), wb.ravel())])
-    return _out((b ** 2).reshape(rb.shape))
+    return _out((b**2).reshape(rb.shape))
 
 
 @_together
@@ -335,5 +348,6 @@ def mindlin_force(u, mu, N, d, E_star, G_star):
     # |u|/u* clipped to [0, 1]; u* = 0 (d = 0): every displacement is beyond it
     x = np.where(us > 0, np.minimum(np.abs(u), us) / np.where(us > 0, us, 1.0), 1.0)
     with np.errstate(over="ignore", invalid="ignore"):
-        return _finite("the tangential force T", np.sign(u) * np.asarray(mu) * N
-                       * (1 - (1 - x) ** 1.5))
+        return _finite(
+            "the tangential force T", np.sign(u) * np.asarray(mu) * N * (1 - (1 - x) ** 1.5)
+        )

@@ -4,6 +4,7 @@ Each subcommand lives in ``rolling_env.commands.<module>`` and provides
 ``register(subparsers)``, which adds its parser and sets ``func`` (args -> exit code).
 Bad arguments give a one-line error naming the parameter and exit code 2.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -15,13 +16,13 @@ import sys
 
 from .io import check_writable, interrupt_ends_process
 
-COMMAND_MODULES = ["physics", "figures", "converge", "stability", "bench", "rollout",
-                   "accuracy"]
+COMMAND_MODULES = ["physics", "figures", "converge", "stability", "bench", "rollout", "accuracy"]
 
 
 def checked_float(name, check):
     """argparse type: a float passed to ``check(name, x)``, a library check that returns it
     or raises ValueError naming ``name`` (the flag's name, so the message names the flag)."""
+
     def conv(text):
         try:
             x = float(text)
@@ -31,15 +32,22 @@ def checked_float(name, check):
             return check(name, x)
         except ValueError as e:
             raise argparse.ArgumentTypeError(str(e)) from None
+
     conv.__name__ = name
     return conv
 
 
 def finite_float(name, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=False, allow_inf=False):
-    """argparse type: a float checked by ``validation.check_range`` (message names the parameter)."""
+    """argparse type: a float checked by ``validation.check_range`` (message names the
+    parameter)."""
     from .validation import check_range
-    return checked_float(name, lambda n, x: check_range(n, x, lo, hi, lo_open=lo_open,
-                                                        hi_open=hi_open, allow_inf=allow_inf))
+
+    return checked_float(
+        name,
+        lambda n, x: check_range(
+            n, x, lo, hi, lo_open=lo_open, hi_open=hi_open, allow_inf=allow_inf
+        ),
+    )
 
 
 def positive_int(name, lo=1, hi=10**9):
@@ -51,29 +59,37 @@ def positive_int(name, lo=1, hi=10**9):
         if not lo <= x <= hi:
             raise argparse.ArgumentTypeError(f"{name} must be an integer in [{lo}, {hi}], got {x}")
         return x
+
     conv.__name__ = name
     return conv
 
 
 def file_path(name):
     """argparse type: a path for one output file (not an existing folder, not ending in '/')."""
+
     def conv(text):
         import os
+
         if not text or text.endswith(("/", os.sep)) or os.path.isdir(text):
-            raise argparse.ArgumentTypeError(f"{name} must be a file path (the report), got the "
-                                             f"folder {text!r}")
+            raise argparse.ArgumentTypeError(
+                f"{name} must be a file path (the report), got the folder {text!r}"
+            )
         return text
+
     conv.__name__ = name
     return conv
 
 
 def folder_path(name):
     """argparse type: a folder for output files (an existing file is refused)."""
+
     def conv(text):
         import os
+
         if not text or (os.path.exists(text) and not os.path.isdir(text)):
             raise argparse.ArgumentTypeError(f"{name} must be a folder, got the file {text!r}")
         return text
+
     conv.__name__ = name
     return conv
 
@@ -99,6 +115,7 @@ def _jsonable(o):
     """``o`` with numpy values as Python ones, tuples as lists, non-finite floats as strings
     and anything else JSON has no type for as its ``str``."""
     import numpy as np
+
     if isinstance(o, dict):
         return {str(k): _jsonable(v) for k, v in o.items()}
     if isinstance(o, (list, tuple, np.ndarray)):
@@ -120,8 +137,9 @@ def _jsonable(o):
 # A token argparse may take as a negative number rather than an option: its own pattern
 # (-3, -0.5, -.5) misses an exponent and inf/nan, so "--target -3e-7" failed with "expected one
 # argument".  No option of ours looks like a number, so every such token is a value.
-_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$",
-                              re.IGNORECASE)
+_NEGATIVE_NUMBER = re.compile(
+    r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.IGNORECASE
+)
 
 
 class _Parser(argparse.ArgumentParser):

@@ -1,4 +1,5 @@
 """RollingDrive-v0: learn the excitation of the oscillating-rolling nanodrive."""
+
 from __future__ import annotations
 
 import math
@@ -15,8 +16,18 @@ from .model import Drive, DriveParams, check_flags
 from .scenes import EPISODE_STEPS_MAX, Scene, draw_physics, episode_scene, load_scene
 
 OBS_NAMES = (
-    "error", "vstar", "roll_pos", "translate_pos", "normal_force", "tangential_force",
-    "stick_fraction", "clock_sin", "clock_cos", "time_fraction", "last_N", "last_roll",
+    "error",
+    "vstar",
+    "roll_pos",
+    "translate_pos",
+    "normal_force",
+    "tangential_force",
+    "stick_fraction",
+    "clock_sin",
+    "clock_cos",
+    "time_fraction",
+    "last_N",
+    "last_roll",
     "last_creep",
 )
 OBS_BOUND = EK.OBS_BOUND
@@ -113,7 +124,8 @@ class RollingDriveEnv(gym.Env):
     is a shipped scene name (``rolling_env.list_scenes()``), a path to a YAML file, a dict or a
     ``Scene``; ``overrides`` replace scene keys (``mu=0.1``, ``runner_mass=0.01``, ...) with the
     same validation; ``sub_steps=n``, ``resolution=r`` and ``grid_levels=L`` override the
-    numerics (``accuracy=`` re-chooses "auto" sub-steps).  ``render_mode`` is ``"rgb_array"`` (a uint8 frame of the contact and the
+    numerics (``accuracy=`` re-chooses "auto" sub-steps).  ``render_mode`` is ``"rgb_array"``
+    (a uint8 frame of the contact and the
     runner against its target) or ``"human"`` (the same frame in a matplotlib window).
 
     ## Version History
@@ -137,12 +149,15 @@ class RollingDriveEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 30}
 
-    def __init__(self, scene: str | dict | Scene = "default", render_mode: str | None = None,
-                 **overrides):
+    def __init__(
+        self, scene: str | dict | Scene = "default", render_mode: str | None = None, **overrides
+    ):
         self.scene = load_scene(scene, **overrides)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None,"
-                             f" got {render_mode!r}")
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']} or None,"
+                f" got {render_mode!r}"
+            )
         self.render_mode = render_mode
         self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
         self.observation_space = spaces.Box(-OBS_BOUND, OBS_BOUND, (len(OBS_NAMES),), np.float32)
@@ -212,9 +227,22 @@ class RollingDriveEnv(gym.Env):
     def step(self, action):
         a = load_actions(action, (3,), self._act)
         W, st, p = self._arrays
-        bad = EK.env_step_serial(self._act, self._sv, self._target, self._steps, W, st, p,
-                                 self._out, self._obs, self._extra, self._rew, self._trunc,
-                                 self.scene.episode_steps, *self._features)
+        bad = EK.env_step_serial(
+            self._act,
+            self._sv,
+            self._target,
+            self._steps,
+            W,
+            st,
+            p,
+            self._out,
+            self._obs,
+            self._extra,
+            self._rew,
+            self._trunc,
+            self.scene.episode_steps,
+            *self._features,
+        )
         if bad:
             raise_step_error(bad, a, (3,), st, self.scene)
         x = self._extra[0]
@@ -222,23 +250,25 @@ class RollingDriveEnv(gym.Env):
             self._history.append(x[EK.X_XS])
             if self.render_mode == "human":
                 self.render()
-        return (self._obs[0].copy(), float(self._rew[0]), False, bool(self._trunc[0]),
-                self._info())
+        return (self._obs[0].copy(), float(self._rew[0]), False, bool(self._trunc[0]), self._info())
 
     def render(self):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; set render_mode='rgb_array'")
             return None
         from .render import render_frame
+
         frame = render_frame(self, self._render_state)
         if self.render_mode == "human":
             from .render import show
+
             show(frame, self._render_state)
             return None
         return frame
 
     def close(self):
         from .render import close
+
         close(self._render_state)
 
     def _info(self) -> dict:
@@ -257,16 +287,24 @@ def build_drive(scene: Scene) -> tuple[Drive, float]:
     d_max = (3 * sc.N_max / (4 * sc.E_star * math.sqrt(sc.R))) ** (2 / 3)
     a_max = math.sqrt(sc.R * d_max)
     try:
-        drive = Drive(params, a_ref=a_max, resolution=sc.resolution,
-                      stroke=(-sc.stroke_roll, sc.stroke_roll), a_max=a_max, t_ref=sc.period,
-                      ledger=False, levels=sc.grid_levels)  # the env kernel keeps no ledger
+        drive = Drive(
+            params,
+            a_ref=a_max,
+            resolution=sc.resolution,
+            stroke=(-sc.stroke_roll, sc.stroke_roll),
+            a_max=a_max,
+            t_ref=sc.period,
+            ledger=False,
+            levels=sc.grid_levels,
+        )  # the env kernel keeps no ledger
     except ValueError as e:  # the Drive's message names its own arguments: map them to keys
         raise ValueError(
             f"scene '{sc.name}' cannot be built: {e} (the env builds the drive from the scene "
             f"keys: stroke = +-stroke_roll = {sc.stroke_roll:g} m, a_ref = a_max = the contact "
             f"radius at N_max = {sc.N_max:g} N ({a_max:.3g} m), resolution = "
             f"{sc.resolution:g}, levels = grid_levels = {sc.grid_levels}, t_ref = period = "
-            f"{sc.period:g} s, m = runner_mass)") from None
+            f"{sc.period:g} s, m = runner_mass)"
+        ) from None
     return drive, a_max
 
 
@@ -278,13 +316,22 @@ def check_time_limit(max_episode_steps, scene: Scene) -> int:
     m = max_episode_steps
     if m is None:
         return n
-    ok = (isinstance(m, numbers.Real) and not isinstance(m, (bool, np.bool_))
-          and math.isfinite(m) and m == int(m))
+    ok = (
+        isinstance(m, numbers.Real)
+        and not isinstance(m, (bool, np.bool_))
+        and math.isfinite(m)
+        and m == int(m)
+    )
     if not ok or not 1 <= int(m) <= n:
-        hint = (f"; pass episode_steps={int(m)} to lengthen episodes"
-                if ok and n < int(m) <= EPISODE_STEPS_MAX else "")
-        raise ValueError(f"max_episode_steps must be an integer in [1, {n}] (the scene's "
-                         f"episode_steps{hint}), got {m!r}")
+        hint = (
+            f"; pass episode_steps={int(m)} to lengthen episodes"
+            if ok and n < int(m) <= EPISODE_STEPS_MAX
+            else ""
+        )
+        raise ValueError(
+            f"max_episode_steps must be an integer in [1, {n}] (the scene's "
+            f"episode_steps{hint}), got {m!r}"
+        )
     return int(m)
 
 
@@ -296,12 +343,15 @@ def target_option(scene: Scene, options, name: str = "options['target']") -> flo
     if options is None:
         return None
     if not isinstance(options, Mapping):
-        raise ValueError(f"options must be a dict (e.g. {{'target': 3e-7}}) or None, got "
-                         f"{options!r}")
+        raise ValueError(
+            f"options must be a dict (e.g. {{'target': 3e-7}}) or None, got {options!r}"
+        )
     unknown = set(options) - {"target"}
     if unknown:
-        raise ValueError(f"options has unknown key(s) {sorted(map(str, unknown))}; the only "
-                         "option is 'target' [m]")
+        raise ValueError(
+            f"options has unknown key(s) {sorted(map(str, unknown))}; the only "
+            "option is 'target' [m]"
+        )
     if "target" not in options:
         return None
     t = options["target"]
@@ -313,14 +363,18 @@ def target_option(scene: Scene, options, name: str = "options['target']") -> flo
     try:
         t = float(t)
     except OverflowError:  # an integer beyond the float range (10**400)
-        raise ValueError(f"{name} must be a finite displacement in [-{lim!r}, {lim!r}] m, got "
-                         f"an integer too large for a float") from None
+        raise ValueError(
+            f"{name} must be a finite displacement in [-{lim!r}, {lim!r}] m, got "
+            f"an integer too large for a float"
+        ) from None
     if not (math.isfinite(t) and abs(t) <= lim * (1.0 + 1e-12)):
         # the bound as the user reads it: 10 x 5e-7 rounds to 4.9999999999999996e-06, and
         # 5e-06 is admitted (its error observation sits at the clip, as the bound's does)
-        raise ValueError(f"{name} must be a finite displacement in [-{lim:.6g}, "
-                         f"{lim:.6g}] m (OBS_BOUND x the scene's target_max, where the error "
-                         f"observation saturates), got {t!r}")
+        raise ValueError(
+            f"{name} must be a finite displacement in [-{lim:.6g}, "
+            f"{lim:.6g}] m (OBS_BOUND x the scene's target_max, where the error "
+            f"observation saturates), got {t!r}"
+        )
     return t
 
 
@@ -354,13 +408,11 @@ def check_action_dtype(action) -> np.ndarray:
     """``action`` as an array of real numbers (no complex, strings, objects or booleans)."""
     a = np.asarray(action)
     if a.dtype.kind not in "fiu":
-        raise ValueError(f"action must be real numbers in [-1, 1], got dtype {a.dtype}: "
-                         f"{action!r}")
+        raise ValueError(f"action must be real numbers in [-1, 1], got dtype {a.dtype}: {action!r}")
     return a
 
 
-def raise_step_error(bad: int, action, shape, st, scene: Scene | None = None,
-                     extra=None) -> None:
+def raise_step_error(bad: int, action, shape, st, scene: Scene | None = None, extra=None) -> None:
     """Raise what a nonzero status of the env kernel stands for: -1 a bad action (nothing was
     stepped), > 0 envs with a kernel error flag or a non-finite reward or velocity (with
     ``scene``, the error names the scene keys that can cause it).  For a batch (``extra``
@@ -376,8 +428,7 @@ def raise_step_error(bad: int, action, shape, st, scene: Scene | None = None,
     except FloatingPointError as e:
         raise FloatingPointError(f"{e}{_overflow_hint(scene)}{which}") from None
     # no flag raised: a non-finite reward or velocity
-    raise FloatingPointError(f"non-finite state after a physics tick{_overflow_hint(scene)}"
-                             f"{which}")
+    raise FloatingPointError(f"non-finite state after a physics tick{_overflow_hint(scene)}{which}")
 
 
 def _failed_envs(st, extra) -> str:
@@ -387,9 +438,11 @@ def _failed_envs(st, extra) -> str:
     EK.mark_failed(st, extra, failed)
     bad = np.flatnonzero(failed).tolist()
     shown = ", ".join(map(str, bad[:10])) + (", ..." if len(bad) > 10 else "")
-    return (f" (in {len(bad)} of the batch's {st.shape[0]} envs: {shown}; the others stepped "
-            "normally; reset the failed ones, in gym.make_vec with "
-            "reset(options={'reset_mask': mask}))")
+    return (
+        f" (in {len(bad)} of the batch's {st.shape[0]} envs: {shown}; the others stepped "
+        "normally; reset the failed ones, in gym.make_vec with "
+        "reset(options={'reset_mask': mask}))"
+    )
 
 
 def _overflow_hint(scene: Scene | None) -> str:
@@ -398,10 +451,12 @@ def _overflow_hint(scene: Scene | None) -> str:
     if scene is None or scene.F_ext == 0.0 or not 0.0 < scene.runner_mass < math.inf:
         return ""
     acc = abs(scene.F_ext) / scene.runner_mass
-    return (f"; the likely cause in this scene: a runner of runner_mass = "
-            f"{scene.runner_mass:g} kg under F_ext = {scene.F_ext:g} N accelerates at "
-            f"{acc:.3g} m/s^2 wherever the contact does not hold it, and its velocity or "
-            "displacement leaves the floating-point range: raise runner_mass or lower |F_ext|")
+    return (
+        f"; the likely cause in this scene: a runner of runner_mass = "
+        f"{scene.runner_mass:g} kg under F_ext = {scene.F_ext:g} N accelerates at "
+        f"{acc:.3g} m/s^2 wherever the contact does not hold it, and its velocity or "
+        "displacement leaves the floating-point range: raise runner_mass or lower |F_ext|"
+    )
 
 
 def check_actions(action, shape) -> np.ndarray:
@@ -418,10 +473,18 @@ def check_actions(action, shape) -> np.ndarray:
 
 
 INFO_COLUMNS = {  # info key: column of the env kernel's extras (see _envkernel.X_*)
-    "reward_track": EK.X_TRACK, "reward_wear": EK.X_WEAR, "reward_final": EK.X_FINAL,
+    "reward_track": EK.X_TRACK,
+    "reward_wear": EK.X_WEAR,
+    "reward_final": EK.X_FINAL,
     "saturation": EK.X_SAT,
-    "omega_R": EK.X_U, "v": EK.X_V, "N": EK.X_N, "T": EK.X_T, "slip_work": EK.X_SLIP,
-    "stick_fraction": EK.X_STICK, "xstar": EK.X_XS, "vstar": EK.X_VS,
+    "omega_R": EK.X_U,
+    "v": EK.X_V,
+    "N": EK.X_N,
+    "T": EK.X_T,
+    "slip_work": EK.X_SLIP,
+    "stick_fraction": EK.X_STICK,
+    "xstar": EK.X_XS,
+    "vstar": EK.X_VS,
 }
 _INFO_KEYS = tuple(INFO_COLUMNS)
 # the info columns are one block of the extras, in the order of INFO_COLUMNS: the batched

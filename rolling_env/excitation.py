@@ -5,6 +5,7 @@ rolling amplitude w = W/a1) and a geometry (R, a1, period tau).  It produces the
 inputs (indentation d, omega R, v) of ``model.Drive.run``: the forth half-period with d1,
 +omega R, +v, the back half-period with d2, -omega R, -v.
 """
+
 from __future__ import annotations
 
 import math
@@ -41,7 +42,7 @@ class SquareWave:
 
     @property
     def d1(self) -> float:
-        return self.a1 ** 2 / self.R
+        return self.a1**2 / self.R
 
     @property
     def d2(self) -> float:
@@ -67,7 +68,8 @@ class SquareWave:
         return (0.0, self.W) if self.direction > 0 else (-self.W, 0.0)
 
     def ticks(self, periods: int, ticks_per_half: int = 1):
-        """Per-tick (d, omega_R, v) arrays for ``periods`` full periods; dt_tick = tau/2/ticks_per_half."""
+        """Per-tick (d, omega_R, v) arrays for ``periods`` full periods; dt_tick =
+        tau/2/ticks_per_half."""
         if int(periods) != periods or periods < 1:
             raise ValueError(f"periods must be an integer >= 1, got {periods}")
         if int(ticks_per_half) != ticks_per_half or ticks_per_half < 1:

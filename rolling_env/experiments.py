@@ -9,6 +9,7 @@
 Dimensionless inputs follow the paper; the SI geometry only matters with finite friction
 (a1/R and G*/E*) and is fixed by ``Geometry``.
 """
+
 from __future__ import annotations
 
 import math
@@ -25,7 +26,9 @@ from .model import Drive, DriveParams, check_n_sub
 from .scenes import _SPEC as SCENE_RANGES
 from .validation import check_int, check_range
 
-DEFAULT_RESOLUTION = 64.0  # springs per a1; chosen from results/work_precision.csv (docs/numerical-quality.md)
+DEFAULT_RESOLUTION = (
+    64.0  # springs per a1; chosen from results/work_precision.csv (docs/numerical-quality.md)
+)
 
 
 A_OVER_R_RANGE = (1e-6, 0.5)
@@ -60,10 +63,22 @@ class Geometry:
         return self.g_over_e * self.E_star
 
 
-def _drive(wave: SquareWave, geo: Geometry, params: DriveParams, resolution: float,
-           grid_offset: float = 0.0) -> Drive:
-    return Drive(params, a_ref=wave.a1, resolution=resolution, stroke=wave.stroke,
-                 a_max=wave.a1, t_ref=wave.tau, grid_offset=grid_offset)
+def _drive(
+    wave: SquareWave,
+    geo: Geometry,
+    params: DriveParams,
+    resolution: float,
+    grid_offset: float = 0.0,
+) -> Drive:
+    return Drive(
+        params,
+        a_ref=wave.a1,
+        resolution=resolution,
+        stroke=wave.stroke,
+        a_max=wave.a1,
+        t_ref=wave.tau,
+        grid_offset=grid_offset,
+    )
 
 
 MAX_TICKS = 5 * 10**6  # ticks of one simulated run: its per-tick inputs and outputs are held
@@ -91,14 +106,15 @@ def _check_run_length(periods, ticks_per_half, lo=1):
     periods = check_int("periods", periods, lo, MAX_TICKS // 2)
     ticks = 2 * periods * ticks_per_half
     if ticks > MAX_TICKS:
-        raise ValueError(f"periods x 2 ticks_per_half = {ticks} ticks exceeds {MAX_TICKS:.0e} "
-                         "(one run keeps every tick's inputs and outputs in memory): lower "
-                         "periods or ticks_per_half")
+        raise ValueError(
+            f"periods x 2 ticks_per_half = {ticks} ticks exceeds {MAX_TICKS:.0e} "
+            "(one run keeps every tick's inputs and outputs in memory): lower "
+            "periods or ticks_per_half"
+        )
     return periods, ticks_per_half
 
 
-def _impulse_run(delta, eps, w, vstar_ratio, resolution, geo, ticks_per_half, n_sub,
-                 grid_offset):
+def _impulse_run(delta, eps, w, vstar_ratio, resolution, geo, ticks_per_half, n_sub, grid_offset):
     """A prescribed-runner drive under the square wave: returns ``run(k)``, which runs k more
     periods in one kernel call and gives the impulse of T of each, normalised as
     I / (2 G* a1^2 tau)."""
@@ -107,34 +123,56 @@ def _impulse_run(delta, eps, w, vstar_ratio, resolution, geo, ticks_per_half, n_
     drv.reset()
     dt = wave.dt_tick(ticks_per_half)
     vs = vstar_ratio * wave.omega_R
-    unit = 2 * geo.G_star * wave.a1 ** 2 * wave.tau
+    unit = 2 * geo.G_star * wave.a1**2 * wave.tau
     per = 2 * ticks_per_half
 
     def run(k):
         d, u, v = wave.ticks(k, ticks_per_half)
         out = drv.run(dt_tick=dt, n_sub=n_sub, omega_R=u, v=v, d=d, vstar=vs)
         return out["impulse"].reshape(k, per).sum(axis=1) / unit
+
     return run
 
 
-def period_impulse(delta, eps, w, vstar_ratio, *, resolution=DEFAULT_RESOLUTION, periods=3,
-                   geo: Geometry = Geometry(), ticks_per_half=1, n_sub=1, grid_offset=0.0):
+def period_impulse(
+    delta,
+    eps,
+    w,
+    vstar_ratio,
+    *,
+    resolution=DEFAULT_RESOLUTION,
+    periods=3,
+    geo: Geometry = Geometry(),
+    ticks_per_half=1,
+    n_sub=1,
+    grid_offset=0.0,
+):
     """Impulse of T over the last of ``periods`` periods with a prescribed runner
     (infinite friction), normalised as I / (2 G* a1^2 tau) (paper Fig. 8)."""
     delta, eps, w, resolution = _check_common(delta, eps, w, resolution)
     vstar_ratio = check_range("vstar_ratio", vstar_ratio, -1e3, 1e3)
     periods, ticks_per_half = _check_run_length(periods, ticks_per_half)
-    run = _impulse_run(delta, eps, w, vstar_ratio, resolution, geo, ticks_per_half, n_sub,
-                       grid_offset)
+    run = _impulse_run(
+        delta, eps, w, vstar_ratio, resolution, geo, ticks_per_half, n_sub, grid_offset
+    )
     return float(run(periods)[-1])
 
 
-STEADY_TOL = 1e-12     # periodic steady state: the working point changes less than this per
+STEADY_TOL = 1e-12  # periodic steady state: the working point changes less than this per
 STEADY_MAX_PERIODS = 2000  # period (in omega R), checked from ``periods`` on, up to this many
 
 
-def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
-                  geo: Geometry = Geometry(), grid_offset=0.0, until_steady=True):
+def working_point(
+    delta,
+    eps,
+    w,
+    *,
+    resolution=DEFAULT_RESOLUTION,
+    periods=3,
+    geo: Geometry = Geometry(),
+    grid_offset=0.0,
+    until_steady=True,
+):
     """Simulated working point v*/(omega R): the zero of the period impulse (Eq. 31).
 
     With infinite friction and a prescribed runner the impulse is affine in v*, so two runs
@@ -153,8 +191,7 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
     delta, eps, w, resolution = _check_common(delta, eps, w, resolution)
     periods = check_int("periods", periods, 2, STEADY_MAX_PERIODS)
     t0 = time.perf_counter()
-    runs = [_impulse_run(delta, eps, w, V, resolution, geo, 1, 1, grid_offset)
-            for V in (0.0, 0.1)]
+    runs = [_impulse_run(delta, eps, w, V, resolution, geo, 1, 1, grid_offset) for V in (0.0, 0.1)]
     i0, i1 = runs[0](periods), runs[1](periods)
     sims = -0.1 * i0 / (i1 - i0)  # the working point of each period so far
     k = periods
@@ -168,7 +205,7 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
         more = np.concatenate([sims[-1:], -0.1 * j0 / (j1 - j0)])
         hit = np.flatnonzero(np.abs(np.diff(more)) <= STEADY_TOL)
         if hit.size:
-            sims = np.concatenate([sims, more[1:hit[0] + 2]])
+            sims = np.concatenate([sims, more[1 : hit[0] + 2]])
             k += hit[0] + 1
             steady = True
         else:
@@ -184,24 +221,38 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
         "eq29": float(analytic.eq29(delta, eps)),
         "rel_error": (float(abs(sim - eq32) / abs(eq32)) if eq32 not in (None, 0.0) else None),
         "seconds": seconds,
-        "delta": delta, "eps": eps, "w": w, "resolution": resolution, "periods": k,
+        "delta": delta,
+        "eps": eps,
+        "w": w,
+        "resolution": resolution,
+        "periods": k,
         "steady": bool(steady),
     }
     notes = []
     if not steady:
-        notes.append(f"not periodic after {k} periods: the value is the last period's and "
-                     f"still changed by {abs(sim - prev):.1e} in it"
-                     + ("" if until_steady else " (until_steady=False)"))
+        notes.append(
+            f"not periodic after {k} periods: the value is the last period's and "
+            f"still changed by {abs(sim - prev):.1e} in it"
+            + ("" if until_steady else " (until_steady=False)")
+        )
     gap = 1.0 - math.sqrt(delta)  # a1 - a2 in a1: the back-step contact edge
     if 0.0 < gap < 2.0 / resolution:
         need = math.ceil(8.0 / gap)
         both = eq32 is not None and w - 2.0 < 2.0 / resolution
-        notes.append(f"1 - sqrt(delta) = {gap:.3g} a1 spans {gap * resolution:.2g} cells: not "
-                     "resolved, the relative error can reach "
-                     + ("several times Eq. 32 (w - 2 is below two cells too)" if both
-                        else "1% at 64 and 10% at 16 cells per a1")
-                     + (f"; about {need} cells per a1 resolve it" if need <= 1e5 else
-                        "; it cannot be resolved within the largest resolution (1e5)"))
+        notes.append(
+            f"1 - sqrt(delta) = {gap:.3g} a1 spans {gap * resolution:.2g} cells: not "
+            "resolved, the relative error can reach "
+            + (
+                "several times Eq. 32 (w - 2 is below two cells too)"
+                if both
+                else "1% at 64 and 10% at 16 cells per a1"
+            )
+            + (
+                f"; about {need} cells per a1 resolve it"
+                if need <= 1e5
+                else "; it cannot be resolved within the largest resolution (1e5)"
+            )
+        )
     if w < 2:
         notes.append("Eq. 32 holds for w >= 2 only: no eq32 value here")
         try:
@@ -214,8 +265,17 @@ def working_point(delta, eps, w, *, resolution=DEFAULT_RESOLUTION, periods=3,
     return res
 
 
-def force_sum(delta, eps, w, vstar_ratio, *, resolution=DEFAULT_RESOLUTION, periods=2,
-              geo: Geometry = Geometry(), ticks_per_half=8):
+def force_sum(
+    delta,
+    eps,
+    w,
+    vstar_ratio,
+    *,
+    resolution=DEFAULT_RESOLUTION,
+    periods=2,
+    geo: Geometry = Geometry(),
+    ticks_per_half=8,
+):
     """Steady rolling force sum (T1 + T2)/(2 G* a1^2) (paper Fig. 6): T at the end of the last
     forth and back steps with a prescribed runner (steady for w >= 2)."""
     delta, eps, w, resolution = _check_common(delta, eps, w, resolution)
@@ -225,12 +285,18 @@ def force_sum(delta, eps, w, vstar_ratio, *, resolution=DEFAULT_RESOLUTION, peri
     drv = _drive(wave, geo, DriveParams(geo.R, geo.E_star, geo.G_star), resolution)
     drv.reset()
     d, u, v = wave.ticks(periods, ticks_per_half)
-    out = drv.run(dt_tick=wave.dt_tick(ticks_per_half), n_sub=1, omega_R=u, v=v, d=d,
-                  vstar=vstar_ratio * wave.omega_R)
+    out = drv.run(
+        dt_tick=wave.dt_tick(ticks_per_half),
+        n_sub=1,
+        omega_R=u,
+        v=v,
+        d=d,
+        vstar=vstar_ratio * wave.omega_R,
+    )
     T = out["T"]
     T1 = T[-ticks_per_half - 1]
     T2 = T[-1]
-    return (T1 + T2) / (2 * geo.G_star * wave.a1 ** 2)
+    return (T1 + T2) / (2 * geo.G_star * wave.a1**2)
 
 
 ENERGY_FLOOR = 1e-9  # round-off floor of energy balances, in 2 G* a1^3 per period
@@ -249,7 +315,8 @@ def check_omega_n_ratio(r, name: str = "omega_n_ratio") -> float:
 
 
 def natural_frequency_mass(r: float, wave: SquareWave, G_star: float) -> float:
-    """Runner mass m [kg] for omega_n / Omega = r with omega_n = sqrt(2 a1 G*/m), Omega = 2 pi/tau."""
+    """Runner mass m [kg] for omega_n / Omega = r with omega_n = sqrt(2 a1 G*/m), Omega = 2
+    pi/tau."""
     r = check_omega_n_ratio(r)
     if r == 0:
         return math.inf
@@ -259,9 +326,23 @@ def natural_frequency_mass(r: float, wave: SquareWave, G_star: float) -> float:
     return 2 * wave.a1 * G_star / (r * Omega) ** 2
 
 
-def simulate(delta, eps, w, omega_n_ratio, *, mu=math.inf, periods=40,
-             resolution=DEFAULT_RESOLUTION, geo: Geometry = Geometry(), ticks_per_half=1,
-             n_sub=None, direction=1, F_ext=0.0, vstar0_ratio=0.0, record=False):
+def simulate(
+    delta,
+    eps,
+    w,
+    omega_n_ratio,
+    *,
+    mu=math.inf,
+    periods=40,
+    resolution=DEFAULT_RESOLUTION,
+    geo: Geometry = Geometry(),
+    ticks_per_half=1,
+    n_sub=None,
+    direction=1,
+    F_ext=0.0,
+    vstar0_ratio=0.0,
+    record=False,
+):
     """Square-wave excitation driving a free runner of mass m (omega_n/Omega = r).
 
     r = omega_n / Omega with omega_n = sqrt(2 a1 G*/m) and Omega = 2 pi / tau; r = inf is a
@@ -318,14 +399,18 @@ def simulate(delta, eps, w, omega_n_ratio, *, mu=math.inf, periods=40,
     def run(vstar_ratio=None):
         drv = _drive(wave, geo, params, resolution)
         drv.reset(vstar0=direction * vstar0_ratio * wave.omega_R)
-        vs = None if vstar_ratio is None else np.full(d.size, direction * vstar_ratio * wave.omega_R)
+        vs = (
+            None if vstar_ratio is None else np.full(d.size, direction * vstar_ratio * wave.omega_R)
+        )
         return drv, drv.run(dt_tick=dt_tick, n_sub=int(n_sub), omega_R=u, v=v, d=d, vstar=vs)
 
     per = 2 * ticks_per_half
     t0 = time.perf_counter()
     if math.isinf(m):
+
         def last_impulse(V):
             return direction * run(V)[1]["impulse"][-per:].sum()
+
         hi = abs(1 - eps) + 1.0
         V = brentq(last_impulse, -hi, hi, xtol=1e-12 * hi, rtol=1e-12)
         drv, out = run(V)
@@ -337,16 +422,20 @@ def simulate(delta, eps, w, omega_n_ratio, *, mu=math.inf, periods=40,
     x_start = xs[-half - 1] if half < xs.shape[0] else 0.0
     mean_v = (xs[-1] - x_start) / (half * dt_tick)
     e = drv.energy
-    unit = 2 * geo.G_star * wave.a1 ** 3
+    unit = 2 * geo.G_star * wave.a1**3
     res = {
         "mean_v_star_over_omega_R": float(direction * mean_v / wave.omega_R),
         "slip_work": float(e["slip"] / periods / unit),
-        "energy_residual": float(e["residual"] / max(e["work_in"],
-                                                     ENERGY_FLOOR * unit * int(periods))),
+        "energy_residual": float(
+            e["residual"] / max(e["work_in"], ENERGY_FLOOR * unit * int(periods))
+        ),
         "seconds": seconds,
         "eq32": float(analytic.eq32(delta, eps, w)) if w >= 2 else None,
-        "n_sub": int(n_sub), "resolution": resolution, "periods": int(periods),
-        "omega_n_ratio": omega_n_ratio, "mu": mu,
+        "n_sub": int(n_sub),
+        "resolution": resolution,
+        "periods": int(periods),
+        "omega_n_ratio": omega_n_ratio,
+        "mu": mu,
         **step_status(omega_n_ratio, wave, int(n_sub), ticks_per_half),
     }
     if record:
@@ -373,8 +462,9 @@ def runner_steps_per_period(omega_n_ratio, wave: SquareWave, n_sub, ticks_per_ha
     return n_sub * wave.tau / (r * wave.dt_tick(ticks_per_half))
 
 
-def default_substeps(omega_n_ratio, wave: SquareWave, resolution, ticks_per_half=1,
-                     mu=math.inf) -> int:
+def default_substeps(
+    omega_n_ratio, wave: SquareWave, resolution, ticks_per_half=1, mu=math.inf
+) -> int:
     """Sub-steps per tick: the larger of two rules.
 
     * Patch: the patch travels at most a1/16 per sub-step (``PATCH_TRAVEL_MAX``; 4 cells at
@@ -450,24 +540,32 @@ def step_status(omega_n_ratio, wave: SquareWave, n_sub, ticks_per_half=1) -> dic
     want = RUNNER_STEPS_PER_PERIOD
     if have >= want * (1 - 1e-9):
         return dict(step_converged=True, runner_steps_per_period=have, step_note="")
-    note = (f"runner period resolved by {have:.3g} sub-steps, below the {want:g} that "
-            f"default_substeps asks for at omega_n/Omega = {r:g}: the mean velocity is not "
-            f"guaranteed converged in the step to {STEP_TOL_REL:.0%} (its step error is second "
-            "order)")
+    note = (
+        f"runner period resolved by {have:.3g} sub-steps, below the {want:g} that "
+        f"default_substeps asks for at omega_n/Omega = {r:g}: the mean velocity is not "
+        f"guaranteed converged in the step to {STEP_TOL_REL:.0%} (its step error is second "
+        "order)"
+    )
     if have < 2 * math.pi / 2.0:
-        note += ("; below about 3 sub-steps per runner period (omega_n dt > 2) the runner "
-                 "step blends into backward Euler, which damps the runner's ringing and tends "
-                 "to the massless limit")
+        note += (
+            "; below about 3 sub-steps per runner period (omega_n dt > 2) the runner "
+            "step blends into backward Euler, which damps the runner's ringing and tends "
+            "to the massless limit"
+        )
     if r > RUNNER_CAPPED_MAX:
-        note += (f" (above omega_n/Omega = {RUNNER_CAPPED_MAX:g} the default does not resolve "
-                 "the runner period: the step gives the massless limit, no net motion, which "
-                 "is within the step tolerance where the mean velocity is itself below it, as "
-                 "measured at delta 0.7, w 2.5 from omega_n/Omega ~ 70 on)")
+        note += (
+            f" (above omega_n/Omega = {RUNNER_CAPPED_MAX:g} the default does not resolve "
+            "the runner period: the step gives the massless limit, no net motion, which "
+            "is within the step tolerance where the mean velocity is itself below it, as "
+            "measured at delta 0.7, w 2.5 from omega_n/Omega ~ 70 on)"
+        )
     elif r > RUNNER_RESOLVED_MAX:
-        note += (f" (sub-steps capped at their omega_n/Omega = {RUNNER_RESOLVED_MAX:g} value; "
-                 "measured at delta 0.7, w 2.5 up to omega_n/Omega = 1000 the capped default "
-                 "stayed within 1e-3 of the step tolerance of the converged mean velocity, "
-                 "the slip work within 3.2%)")
+        note += (
+            f" (sub-steps capped at their omega_n/Omega = {RUNNER_RESOLVED_MAX:g} value; "
+            "measured at delta 0.7, w 2.5 up to omega_n/Omega = 1000 the capped default "
+            "stayed within 1e-3 of the step tolerance of the converged mean velocity, "
+            "the slip work within 3.2%)"
+        )
     return dict(step_converged=False, runner_steps_per_period=have, step_note=note)
 
 
@@ -475,8 +573,7 @@ MINDLIN_MU_MAX = 1e3  # beyond it the slip distance u* = 3 mu N / (16 G* a1) lea
 MINDLIN_POINTS_MAX = 10**5  # displacement points (ticks of one run)
 
 
-def mindlin(mu, *, points=21, resolution=DEFAULT_RESOLUTION, geo: Geometry = Geometry(),
-            n_sub=20):
+def mindlin(mu, *, points=21, resolution=DEFAULT_RESOLUTION, geo: Geometry = Geometry(), n_sub=20):
     """Cattaneo-Mindlin: press with d1, then displace tangentially up to 1.2 u* (runner held).
 
     Returns ``u_over_ustar``, ``T_over_muN`` (simulated) and ``analytic`` lists."""
@@ -485,10 +582,9 @@ def mindlin(mu, *, points=21, resolution=DEFAULT_RESOLUTION, geo: Geometry = Geo
     n_sub = check_n_sub(n_sub)
     check_range("resolution", resolution, 2.0, 1e5)
     a1 = geo.a1
-    d1 = a1 ** 2 / geo.R
+    d1 = a1**2 / geo.R
     params = DriveParams(geo.R, geo.E_star, geo.G_star, mu=mu)
-    drv = Drive(params, a_ref=a1, resolution=resolution, stroke=(0.0, 0.0), a_max=a1,
-                t_ref=geo.tau)
+    drv = Drive(params, a_ref=a1, resolution=resolution, stroke=(0.0, 0.0), a_max=a1, t_ref=geo.tau)
     drv.reset()
     ustar = analytic.mindlin_ustar(mu, d1, geo.E_star, geo.G_star)
     N = analytic.hertz_force(d1, geo.R, geo.E_star)
@@ -496,13 +592,20 @@ def mindlin(mu, *, points=21, resolution=DEFAULT_RESOLUTION, geo: Geometry = Geo
     du = np.diff(u)
     dt = geo.tau
     # no rolling, runner held: creep rate -v = du/dt
-    out = drv.run(dt_tick=dt, n_sub=n_sub, omega_R=np.zeros(du.size), v=-du / dt,
-                  d=np.full(du.size, d1), vstar=np.zeros(du.size))
+    out = drv.run(
+        dt_tick=dt,
+        n_sub=n_sub,
+        omega_R=np.zeros(du.size),
+        v=-du / dt,
+        d=np.full(du.size, d1),
+        vstar=np.zeros(du.size),
+    )
     T = np.concatenate([[0.0], out["T"]])
     ana = analytic.mindlin_force(u, mu, N, d1, geo.E_star, geo.G_star)
     return {
         "u_over_ustar": (u / ustar).tolist(),
         "T_over_muN": (T / (mu * N)).tolist(),
         "analytic": (np.asarray(ana) / (mu * N)).tolist(),
-        "mu": mu, "resolution": resolution,
+        "mu": mu,
+        "resolution": resolution,
     }

@@ -7,6 +7,7 @@ block removes them all, so a command that writes several files (a CSV and its pl
 paper figures, the comparison tables) leaves either all of them new or all of them as they
 were: a full disk halfway no longer leaves a new CSV beside an old plot.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -27,8 +28,10 @@ def _handler_swapped(sig, expected, handler):
     """Signal ``sig`` handled by ``handler`` for the block where it is ``expected`` now (and
     this is the main thread, the only one that may set handlers); ``expected`` again after
     it."""
-    if (threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(sig) is not expected):
+    if (
+        threading.current_thread() is not threading.main_thread()
+        or signal.getsignal(sig) is not expected
+    ):
         yield  # e.g. SIGINT ignored (a script's background job) or someone else's handler
         return
     signal.signal(sig, handler)
@@ -63,8 +66,10 @@ def interrupt_raises():
     and SIGTERM, where it has the OS default (ending the process at once), raises
     SystemExit(143): the writes below then remove their temporary files instead of leaving
     them behind.  A no-op where the signals have other handlers."""
-    with _sigint_swapped(signal.SIG_DFL, signal.default_int_handler), \
-            _handler_swapped(signal.SIGTERM, signal.SIG_DFL, _raise_terminated):
+    with (
+        _sigint_swapped(signal.SIG_DFL, signal.default_int_handler),
+        _handler_swapped(signal.SIGTERM, signal.SIG_DFL, _raise_terminated),
+    ):
         yield
 
 
@@ -80,8 +85,9 @@ def _atomic_write(path, writer) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if path.is_dir():  # the rename would fail: say so before anything is written
-        raise IsADirectoryError(errno.EISDIR, "a folder has the name of the file to write",
-                                str(path))
+        raise IsADirectoryError(
+            errno.EISDIR, "a folder has the name of the file to write", str(path)
+        )
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
     os.close(fd)
     stage = _STAGE.get()
@@ -165,14 +171,17 @@ def check_writable(path, folder: bool = False, name: str = "out") -> Path:
     d = path if folder else path.parent
     up = next((p for p in (d, *d.parents) if p.exists() or p.is_symlink()), Path("."))
     if not up.is_dir():
-        raise NotADirectoryError(f"--{name}: cannot write {str(path)!r}: {str(up)!r} is a file, "
-                                 "not a folder")
+        raise NotADirectoryError(
+            f"--{name}: cannot write {str(path)!r}: {str(up)!r} is a file, not a folder"
+        )
     try:
         with tempfile.NamedTemporaryFile(dir=up, prefix=".probe."):
             pass
     except OSError as e:
-        raise OSError(f"--{name}: cannot write {str(path)!r}: the folder {str(up)!r} takes no "
-                      f"new files ({e.strerror or e})") from None
+        raise OSError(
+            f"--{name}: cannot write {str(path)!r}: the folder {str(up)!r} takes no "
+            f"new files ({e.strerror or e})"
+        ) from None
     return path
 
 

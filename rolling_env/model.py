@@ -5,6 +5,7 @@ state and advances it tick by tick with piecewise-constant inputs (normal force 
 omega R and v).  The compiled kernel is chosen once, from the feature set of the parameters
 (finite or infinite friction, prescribed or free runner, load or none), see ``_kernel``.
 """
+
 from __future__ import annotations
 
 import math
@@ -19,10 +20,12 @@ from .validation import as_real_array, check_int, check_range
 _INF = math.inf
 
 
-SLIDE_MESSAGE = ("the massless runner (m = 0) has no force equilibrium: |F_ext| exceeds the "
-                 "largest force the contact holds (mu N with finite friction, 0 without contact)"
-                 "; the runner would accelerate without bound.  Give it a finite mass m > 0, or "
-                 "keep |F_ext| below mu N with the contact closed")
+SLIDE_MESSAGE = (
+    "the massless runner (m = 0) has no force equilibrium: |F_ext| exceeds the "
+    "largest force the contact holds (mu N with finite friction, 0 without contact)"
+    "; the runner would accelerate without bound.  Give it a finite mass m > 0, or "
+    "keep |F_ext| below mu N with the contact closed"
+)
 
 
 def check_flags(st) -> None:
@@ -33,11 +36,15 @@ def check_flags(st) -> None:
     if flags & K.FLAG_SLIDE:
         raise ValueError(SLIDE_MESSAGE)
     if flags & K.FLAG_GRID:
-        raise RuntimeError("the contact left the spring row: the rolling stroke exceeded the "
-                           "grid built for it (enlarge `stroke`)")
+        raise RuntimeError(
+            "the contact left the spring row: the rolling stroke exceeded the "
+            "grid built for it (enlarge `stroke`)"
+        )
     if flags & K.FLAG_NONFINITE:
-        raise FloatingPointError("the kernel produced a non-finite value (it overflowed the "
-                                 "float range: reduce dt_tick, the rates or the load)")
+        raise FloatingPointError(
+            "the kernel produced a non-finite value (it overflowed the "
+            "float range: reduce dt_tick, the rates or the load)"
+        )
 
 
 @dataclass(frozen=True)
@@ -74,7 +81,9 @@ class DriveParams:
         for name, value in checked.items():  # store the checked floats (not "1e-3" strings)
             object.__setattr__(self, name, value)
         if math.isinf(self.m) and self.F_ext != 0.0:
-            raise ValueError("F_ext needs a finite runner mass m (a prescribed runner ignores loads)")
+            raise ValueError(
+                "F_ext needs a finite runner mass m (a prescribed runner ignores loads)"
+            )
 
     @property
     def features(self) -> tuple[bool, bool, bool]:
@@ -84,7 +93,8 @@ class DriveParams:
 
 @dataclass
 class Grid:
-    """Spring row covering the patch-centre stroke [c_min, c_max] for half-widths up to a_max [m]."""
+    """Spring row covering the patch-centre stroke [c_min, c_max] for half-widths up to a_max
+    [m]."""
 
     c_min: float
     c_max: float
@@ -97,7 +107,9 @@ class Grid:
     def __post_init__(self):
         check_range("dx", self.dx, 0.0, _INF, lo_open=True, hi_open=True)
         if not (self.c_max >= self.c_min):
-            raise ValueError(f"stroke must satisfy c_min <= c_max, got [{self.c_min}, {self.c_max}]")
+            raise ValueError(
+                f"stroke must satisfy c_min <= c_max, got [{self.c_min}, {self.c_max}]"
+            )
         # a whole number of cells, centred on the stroke: mirrored strokes give mirrored grids
         width = self.c_max - self.c_min + 2.0 * (self.a_max + 2.0 * self.dx)
         self.n = int(math.ceil(width / self.dx))
@@ -125,7 +137,7 @@ class CellViews:
     @property
     def L(self) -> np.ndarray:
         """Friction work rows (``K.L_*``); none (0 rows) with infinite friction."""
-        return self.cells[..., K.W_L:, :]
+        return self.cells[..., K.W_L :, :]
 
 
 class Drive(CellViews):
@@ -153,9 +165,19 @@ class Drive(CellViews):
         such a drive); the work array has the same rows either way (``_kernel.work_rows``).
     """
 
-    def __init__(self, params: DriveParams, *, a_ref: float, resolution: float,
-                 stroke: tuple[float, float], a_max: float, t_ref: float,
-                 grid_offset: float = 0.0, ledger: bool = True, levels: int = 0):
+    def __init__(
+        self,
+        params: DriveParams,
+        *,
+        a_ref: float,
+        resolution: float,
+        stroke: tuple[float, float],
+        a_max: float,
+        t_ref: float,
+        grid_offset: float = 0.0,
+        ledger: bool = True,
+        levels: int = 0,
+    ):
         check_range("a_ref", a_ref, 0.0, _INF, lo_open=True, hi_open=True)
         check_range("resolution", resolution, 0.5, 1e5)
         check_range("a_max", a_max, 0.0, _INF, lo_open=True, hi_open=True)
@@ -167,22 +189,32 @@ class Drive(CellViews):
         self.stroke = stroke
         self.L0 = float(a_ref)
         self.t0 = float(t_ref)
-        self.F0 = params.G_star * self.L0 ** 2
-        self.M0 = params.G_star * self.L0 * self.t0 ** 2
+        self.F0 = params.G_star * self.L0**2
+        self.M0 = params.G_star * self.L0 * self.t0**2
         self.W0 = self.F0 * self.L0
         dx = a_ref / resolution
         check_range("grid_offset", grid_offset, -1.0, 1.0)
-        self.grid = Grid(stroke[0] / self.L0, stroke[1] / self.L0, a_max / self.L0, dx / self.L0,
-                         grid_offset)
+        self.grid = Grid(
+            stroke[0] / self.L0, stroke[1] / self.L0, a_max / self.L0, dx / self.L0, grid_offset
+        )
         n = self.grid.n
         self.levels = check_int("levels", levels, 0, LEVELS_MAX)
         if n << self.levels > 20_000_000:
-            raise ValueError(f"the spring row would need {n << self.levels} cells (> 2e7) to "
-                             f"cover the stroke {stroke[1] - stroke[0]:.3g} m at {resolution:g} "
-                             f"cells per a_ref and {self.levels} finer levels: lower the "
-                             "resolution, the levels or the stroke (rolling amplitude)")
-        self._p = np.array([params.R / self.L0, params.E_star / params.G_star,
-                            self.grid.x_lo, self.grid.dx, float(self.levels)])
+            raise ValueError(
+                f"the spring row would need {n << self.levels} cells (> 2e7) to "
+                f"cover the stroke {stroke[1] - stroke[0]:.3g} m at {resolution:g} "
+                f"cells per a_ref and {self.levels} finer levels: lower the "
+                "resolution, the levels or the stroke (rolling amplitude)"
+            )
+        self._p = np.array(
+            [
+                params.R / self.L0,
+                params.E_star / params.G_star,
+                self.grid.x_lo,
+                self.grid.dx,
+                float(self.levels),
+            ]
+        )
         finite_mu, free, load = params.features
         self._mu = params.mu if finite_mu else None
         self._mass = params.m / self.M0 if free else None
@@ -225,7 +257,8 @@ class Drive(CellViews):
                     f"E_star, G_star, m, F_ext, a_ref and t_ref of compatible sizes (got R = "
                     f"{p.R:g} m, E_star = {p.E_star:g} Pa, G_star = {p.G_star:g} Pa, m = "
                     f"{p.m:g} kg, F_ext = {p.F_ext:g} N, a_ref = {self.L0:g} m, t_ref = "
-                    f"{self.t0:g} s)")
+                    f"{self.t0:g} s)"
+                )
 
     @property
     def kernel_features(self):
@@ -265,18 +298,22 @@ class Drive(CellViews):
         try:
             check_range("c0", c0, c_lo, c_hi)
         except ValueError as e:
-            raise ValueError(f"{e}: the patch centre must start inside the stroke the spring row "
-                             "was built for (pass c0 inside it, or build the Drive with a stroke "
-                             "that contains c0)") from None
+            raise ValueError(
+                f"{e}: the patch centre must start inside the stroke the spring row "
+                "was built for (pass c0 inside it, or build the Drive with a stroke "
+                "that contains c0)"
+            ) from None
         check_range("vstar0", vstar0, -_INF, _INF, lo_open=True, hi_open=True)
         m = self.params.m
         kin0 = 0.0
         if math.isfinite(m):  # the ledger starts from the runner's kinetic energy
             kin0 = 0.5 * m * vstar0 * vstar0 / self.W0
             if not math.isfinite(kin0):  # refused before the state changes
-                raise ValueError(f"vstar0 = {vstar0:g} m/s gives the runner (m = {m:g} kg) a "
-                                 "kinetic energy beyond the float range; choose a smaller "
-                                 "vstar0")
+                raise ValueError(
+                    f"vstar0 = {vstar0:g} m/s gives the runner (m = {m:g} kg) a "
+                    "kinetic energy beyond the float range; choose a smaller "
+                    "vstar0"
+                )
         self.cells[:] = 0.0  # the scratch and level-grid rows too: a reset drive is a new one
         self.st[:] = 0.0
         self.st[K.ST_C] = c0 / self.L0
@@ -292,14 +329,17 @@ class Drive(CellViews):
         try:
             U, st = state
         except (TypeError, ValueError):
-            raise ValueError("state must be the pair (U, st) that get_state returns, got "
-                             f"{type(state).__name__}") from None
+            raise ValueError(
+                f"state must be the pair (U, st) that get_state returns, got {type(state).__name__}"
+            ) from None
         arrs = {}
         for name, x, shape in (("U", U, self.U.shape), ("st", st, self.st.shape)):
             a = np.asarray(x)
             if a.dtype.kind not in "fiu" or a.shape != shape:
-                raise ValueError(f"state {name} must be a real array of shape {shape} (this "
-                                 f"drive's grid), got dtype {a.dtype} and shape {a.shape}")
+                raise ValueError(
+                    f"state {name} must be a real array of shape {shape} (this "
+                    f"drive's grid), got dtype {a.dtype} and shape {a.shape}"
+                )
             a = a.astype(np.float64)
             if not np.all(np.isfinite(a)):
                 raise ValueError(f"state {name} must be finite (got NaN or inf)")
@@ -329,9 +369,11 @@ class Drive(CellViews):
         ledger's rows.
         """
         if not self._ledger:
-            raise RuntimeError("this drive was built without the energy ledger (an env's "
-                               "drive, ledger=False): Drive.run keeps the ledger, which this "
-                               "drive has not kept; build a Drive with ledger=True")
+            raise RuntimeError(
+                "this drive was built without the energy ledger (an env's "
+                "drive, ledger=False): Drive.run keeps the ledger, which this "
+                "drive has not kept; build a Drive with ledger=True"
+            )
         check_range("dt_tick", dt_tick, 0.0, _INF, lo_open=True, hi_open=True)
         n_sub = check_n_sub(n_sub)
         self._check_state_valid()
@@ -355,33 +397,53 @@ class Drive(CellViews):
             vs = _as_ticks("vstar", vstar, k)
         else:
             if vstar is not None:
-                raise ValueError(f"vstar is only for a prescribed runner (m = inf); this runner "
-                                 f"is free (m = {self.params.m:g} kg) and its velocity follows "
-                                 "from the runner equation: leave vstar out")
+                raise ValueError(
+                    f"vstar is only for a prescribed runner (m = inf); this runner "
+                    f"is free (m = {self.params.m:g} kg) and its velocity follows "
+                    "from the runner equation: leave vstar out"
+                )
             vs = np.zeros(k)
         a_max = float(np.sqrt(self.params.R * dd.max())) / self.L0 if k else 0.0
         if a_max > self.grid.a_max * (1 + 1e-9):
-            raise ValueError(f"contact half-width {a_max * self.L0:.3e} m exceeds the grid's "
-                             f"a_max {self.grid.a_max * self.L0:.3e} m")
+            raise ValueError(
+                f"contact half-width {a_max * self.L0:.3e} m exceeds the grid's "
+                f"a_max {self.grid.a_max * self.L0:.3e} m"
+            )
         ts = self.t0 / self.L0
         out = np.zeros((k, K.N_OUT))
         # a massless loaded runner can meet a tick without force equilibrium: the error then
         # leaves the drive as it was before this run (the kernel went on through every tick)
-        before = (self.get_state() if self._mass is not None and self._mass == 0.0
-                  and self._load is not None else None)
-        done = K.run_ticks(self.cells, self.st, self._p,
-                           dd / self.L0, u * ts, vv * ts, vs * ts,
-                           self._mu, self._mass, self._load, int(n_sub),
-                           dt_tick / n_sub / self.t0, out)
+        before = (
+            self.get_state()
+            if self._mass is not None and self._mass == 0.0 and self._load is not None
+            else None
+        )
+        done = K.run_ticks(
+            self.cells,
+            self.st,
+            self._p,
+            dd / self.L0,
+            u * ts,
+            vv * ts,
+            vs * ts,
+            self._mu,
+            self._mass,
+            self._load,
+            int(n_sub),
+            dt_tick / n_sub / self.t0,
+            out,
+        )
         try:
             self._check_flags()
         except ValueError as e:  # no force equilibrium: say with which numbers
             N_lo = float(hertz_force(dd.min(), self.params.R, self.params.E_star)) if k else 0.0
             if before is not None:
                 self.U[:], self.st[:] = before
-            raise ValueError(f"{e} (F_ext = {self.params.F_ext:g} N, mu = {self.params.mu:g}, "
-                             f"least normal force of this run N = {N_lo:.6g} N; the drive's "
-                             "state is as before this run)") from None
+            raise ValueError(
+                f"{e} (F_ext = {self.params.F_ext:g} N, mu = {self.params.mu:g}, "
+                f"least normal force of this run N = {N_lo:.6g} N; the drive's "
+                "state is as before this run)"
+            ) from None
         res = self._to_si(out[:done])
         self._check_finite(out[:done], res, dt_tick)
         return res
@@ -400,8 +462,10 @@ class Drive(CellViews):
         (massless runner) belongs to the inputs of the run that set it: cleared here, so that a
         run whose contact does hold the load is not refused for an earlier one's."""
         self.st[K.ST_FLAG] = float(int(self.st[K.ST_FLAG]) & ~K.FLAG_SLIDE)
-        self._check_flags("an earlier run stopped on this error and left the drive's state "
-                          "invalid: reset() the drive before running it again")
+        self._check_flags(
+            "an earlier run stopped on this error and left the drive's state "
+            "invalid: reset() the drive before running it again"
+        )
 
     def _check_finite(self, raw, res, dt_tick):
         """Every returned array and the state (ledger included) must be finite: a float
@@ -410,8 +474,11 @@ class Drive(CellViews):
         # fast path: the largest raw output times the largest SI scale (a NaN or inf makes
         # the max non-finite; an SI overflow makes the product inf)
         scale = max(self.F0, self.F0 * self.t0, self.L0 / self.t0, self.L0, self.W0, 1.0)
-        if (math.isfinite(float(np.abs(raw).max(initial=0.0)) * scale)
-                and math.isfinite(float(np.abs(self.st).max())) and np.isfinite(self.U).all()):
+        if (
+            math.isfinite(float(np.abs(raw).max(initial=0.0)) * scale)
+            and math.isfinite(float(np.abs(self.st).max()))
+            and np.isfinite(self.U).all()
+        ):
             return
         bad = [k for k, a in res.items() if not np.all(np.isfinite(a))]
         if not np.all(np.isfinite(self.st)):
@@ -425,7 +492,8 @@ class Drive(CellViews):
             raise FloatingPointError(
                 f"Drive.run overflowed the float range in {', '.join(bad)} (dt_tick = "
                 f"{dt_tick:g} s): reduce dt_tick, the rates omega_R, v, vstar or the load "
-                "F_ext; the drive's state is no longer valid (reset() it)")
+                "F_ext; the drive's state is no longer valid (reset() it)"
+            )
 
     def _to_si(self, out):
         F0, L0, t0 = self.F0, self.L0, self.t0
@@ -456,8 +524,10 @@ class Drive(CellViews):
         ``work_in`` = |drive| + |ext| + kinetic_start, the scale to judge the residual by.
         """
         if not self.ledger:
-            raise RuntimeError("this drive is stepped by the env kernel, which leaves the energy "
-                               "ledger out of the computation; use Drive.run for energies")
+            raise RuntimeError(
+                "this drive is stepped by the env kernel, which leaves the energy "
+                "ledger out of the computation; use Drive.run for energies"
+            )
         st, W0 = self.st, self.W0
         elastic = float(K.elastic_energy(self.U, st, self._p)) * W0
         m = self.params.m
@@ -517,7 +587,7 @@ class Drive(CellViews):
         """Cell centres x [m], uT [m], uN [m] and slip flag along the row (for plots)."""
         g = self.grid
         dx, n = self.cell_size, g.n << int(self.st[K.ST_LEVEL])
-        x = (g.x_lo + (np.arange(n) + 0.5) * dx)
+        x = g.x_lo + (np.arange(n) + 0.5) * dx
         c, a, d = self.st[K.ST_C], self.st[K.ST_A], self.st[K.ST_D]
         xl = g.x_lo + np.arange(n) * dx
         ell = np.clip(np.minimum(xl + dx, c + a) - np.maximum(xl, c - a), 0.0, None)

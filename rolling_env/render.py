@@ -2,6 +2,7 @@
 
 Each env keeps its own figure and window in a dict (``state``, held by the env): two envs
 rendering at once do not share a window, and closing one leaves the other's open."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -11,6 +12,7 @@ def _figure(state: dict):
     if "fig" not in state:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
+
         fig = Figure(figsize=(6.4, 4.8), dpi=100)
         FigureCanvasAgg(fig)
         state["fig"] = fig
@@ -23,6 +25,7 @@ def render_frame(env, state: dict) -> np.ndarray:
     runner displacement against the target.  The small font is set for the frame only: the
     caller's matplotlib settings stay as they were."""
     import matplotlib
+
     with matplotlib.rc_context({"font.size": 8}):
         return _draw(env, state)
 
@@ -38,10 +41,20 @@ def _draw(env, state: dict) -> np.ndarray:
     um = 1e9
     ax1.plot(x / a, uN * um, color="0.3", lw=1, label="normal deflection uN [nm]")
     ax1b = ax1.twinx()
-    ax1b.bar((x / a)[inc & ~slip], (uT * um)[inc & ~slip], width=drv.cell_size, color="tab:blue",
-             label="uT stick [nm]")
-    ax1b.bar((x / a)[inc & slip], (uT * um)[inc & slip], width=drv.cell_size, color="tab:red",
-             label="uT slip [nm]")
+    ax1b.bar(
+        (x / a)[inc & ~slip],
+        (uT * um)[inc & ~slip],
+        width=drv.cell_size,
+        color="tab:blue",
+        label="uT stick [nm]",
+    )
+    ax1b.bar(
+        (x / a)[inc & slip],
+        (uT * um)[inc & slip],
+        width=drv.cell_size,
+        color="tab:red",
+        label="uT slip [nm]",
+    )
     ax1.set_zorder(ax1b.get_zorder() + 1)  # the normal profile on top of the bars
     ax1.patch.set_visible(False)
     ax1.set_xlim(-env.scene.stroke_roll / a - 1.2, env.scene.stroke_roll / a + 1.2)
@@ -52,8 +65,10 @@ def _draw(env, state: dict) -> np.ndarray:
     bars, bar_labels = ax1b.get_legend_handles_labels()
     ax1.legend(lines + bars, labels + bar_labels, loc="upper left", fontsize=7)
     o = env._info()
-    ax1.set_title(f"{env.scene.name}: N = {o['N']:.3g} N, T = {o['T']:.3g} N, "
-                  f"stick {100 * o['stick_fraction']:.0f}%")
+    ax1.set_title(
+        f"{env.scene.name}: N = {o['N']:.3g} N, T = {o['T']:.3g} N, "
+        f"stick {100 * o['stick_fraction']:.0f}%"
+    )
     h = np.asarray(env._history)
     t = np.arange(h.size) * env.dt * 1e3
     ax2.plot(t, h * um, color="tab:green", label="runner x*")
@@ -71,6 +86,7 @@ def _draw(env, state: dict) -> np.ndarray:
 
 def show(frame: np.ndarray, state: dict) -> None:
     import matplotlib.pyplot as plt
+
     if "win" not in state:
         plt.ion()
         state["win"] = plt.figure()
@@ -86,5 +102,6 @@ def show(frame: np.ndarray, state: dict) -> None:
 def close(state: dict) -> None:
     if "win" in state:
         import matplotlib.pyplot as plt
+
         plt.close(state.pop("win"))
         state.pop("img", None)

@@ -4,6 +4,7 @@ A controller is anything with SB3's ``predict(obs, state=None, episode_start=Non
 deterministic=True) -> (action, state)``: a trained SB3 model, the baselines in ``agents``, or
 the two trivial ones here.
 """
+
 from __future__ import annotations
 
 import csv
@@ -15,9 +16,27 @@ import numpy as np
 
 from .io import atomic_write, write_text
 
-COLUMNS = ("step", "t", "target", "xstar", "vstar", "error", "N", "T", "omega_R", "v",
-           "stick_fraction", "slip_work", "reward", "reward_track", "reward_wear", "saturated",
-           "a_force", "a_roll", "a_creep")
+COLUMNS = (
+    "step",
+    "t",
+    "target",
+    "xstar",
+    "vstar",
+    "error",
+    "N",
+    "T",
+    "omega_R",
+    "v",
+    "stick_fraction",
+    "slip_work",
+    "reward",
+    "reward_track",
+    "reward_wear",
+    "saturated",
+    "a_force",
+    "a_roll",
+    "a_creep",
+)
 
 
 class RandomController:
@@ -48,16 +67,34 @@ def rollout(env, controller, *, seed=0, target=None, max_steps=None) -> dict:
     dt = env.unwrapped.dt
     k = 0
     while True:
-        action, state = controller.predict(obs, state=state, episode_start=np.array([start]),
-                                           deterministic=True)
+        action, state = controller.predict(
+            obs, state=state, episode_start=np.array([start]), deterministic=True
+        )
         action = np.asarray(action, dtype=np.float32).reshape(3)
         start = False
         obs, reward, terminated, truncated, info = env.step(action)
         k += 1
-        rows.append((k, k * dt, info["target"], info["xstar"], info["vstar"], info["error"],
-                     info["N"], info["T"], info["omega_R"], info["v"], info["stick_fraction"],
-                     info["slip_work"], reward, info["reward_track"], info["reward_wear"],
-                     float(info["saturated"]), *action.tolist()))
+        rows.append(
+            (
+                k,
+                k * dt,
+                info["target"],
+                info["xstar"],
+                info["vstar"],
+                info["error"],
+                info["N"],
+                info["T"],
+                info["omega_R"],
+                info["v"],
+                info["stick_fraction"],
+                info["slip_work"],
+                reward,
+                info["reward_track"],
+                info["reward_wear"],
+                float(info["saturated"]),
+                *action.tolist(),
+            )
+        )
         if terminated or truncated or (max_steps is not None and k >= max_steps):
             break
     data = {c: np.array([r[i] for r in rows]) for i, c in enumerate(COLUMNS)}
@@ -80,6 +117,7 @@ def write_csv(data: dict, path: str | os.PathLike) -> Path:
 def plot(data: dict, path: str | os.PathLike, title: str = "") -> Path:
     """Runner against target, forces, and actions over the episode (PNG, written atomically)."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -134,12 +172,17 @@ def make_controller(name: str, env, seed=0, scene=None):
         return ZeroController()
     if name in ("eq32", "eq32-open-loop", "eq32-feedback"):
         from agents import baselines
+
         cls = baselines.Eq32Feedback if name == "eq32-feedback" else baselines.Eq32OpenLoop
         return cls.from_env(env)
     if name.endswith(".zip") and Path(name).exists():
         from agents.evaluate import check_run_scene, load_agent
-        check_run_scene(Path(name).parent, env.unwrapped.scene if scene is None else scene,
-                        by_key=False)  # by content: a copy of a scene under another name is fine
+
+        check_run_scene(
+            Path(name).parent, env.unwrapped.scene if scene is None else scene, by_key=False
+        )  # by content: a copy of a scene under another name is fine
         return load_agent(name, env)
-    raise ValueError(f"controller must be random, zero, eq32 (or eq32-open-loop), "
-                     f"eq32-feedback or an existing model .zip, got {name!r}")
+    raise ValueError(
+        f"controller must be random, zero, eq32 (or eq32-open-loop), "
+        f"eq32-feedback or an existing model .zip, got {name!r}"
+    )

@@ -4,6 +4,7 @@ Kept apart from ``rolling_env.vector`` so that ``gym.make_vec("RollingDrive-v0")
 import Stable-Baselines3 and torch; ``from rolling_env.vector import RollingDriveVecEnv`` still
 works (a lazy re-export).
 """
+
 from __future__ import annotations
 
 import numbers
@@ -18,6 +19,7 @@ from .vector import BatchCore, _check_seed
 
 def _sb3_vecenv_base():
     from stable_baselines3.common.vec_env import VecEnv
+
     return VecEnv
 
 
@@ -27,18 +29,35 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
     ``truncated and not terminated``.  Wrap with ``VecMonitor`` for episode statistics.
     Infos carry the reward terms of every env; the terminal keys only for those that ended."""
 
-    def __init__(self, num_envs: int = 1, scene="default", max_episode_steps=None,
-                 render_mode=None, num_threads=None, **overrides):
+    def __init__(
+        self,
+        num_envs: int = 1,
+        scene="default",
+        max_episode_steps=None,
+        render_mode=None,
+        num_threads=None,
+        **overrides,
+    ):
         if render_mode is not None:
-            raise ValueError("render_mode must be None: the batched env does not render; use "
-                             "a single env (rolling_env.make(..., render_mode='rgb_array'))")
+            raise ValueError(
+                "render_mode must be None: the batched env does not render; use "
+                "a single env (rolling_env.make(..., render_mode='rgb_array'))"
+            )
         # num_threads: None picks serial or threaded steps from measured step times, 1 the
         # serial kernel, k the threaded kernel on k threads (see rolling_env.vector)
-        self.core = BatchCore(num_envs, scene=scene, max_episode_steps=max_episode_steps,
-                              num_threads=num_threads, **overrides)
+        self.core = BatchCore(
+            num_envs,
+            scene=scene,
+            max_episode_steps=max_episode_steps,
+            num_threads=num_threads,
+            **overrides,
+        )
         self.render_mode = None  # set before the base class reads it
-        super().__init__(self.core.num_envs, self.core.observation_space(),
-                         spaces.Box(-1.0, 1.0, (3,), np.float32))
+        super().__init__(
+            self.core.num_envs,
+            self.core.observation_space(),
+            spaces.Box(-1.0, 1.0, (3,), np.float32),
+        )
         self._actions = None
 
     def reset(self):
@@ -57,9 +76,12 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
     def step_wait(self):
         obs, rew, trunc = self.core.step(self._actions)
         x = self.core.extra
-        infos = [{"reward_track": tr, "reward_wear": we, "reward_final": fi} for tr, we, fi in
-                 zip(x[:, EK.X_TRACK].tolist(), x[:, EK.X_WEAR].tolist(),
-                     x[:, EK.X_FINAL].tolist())]
+        infos = [
+            {"reward_track": tr, "reward_wear": we, "reward_final": fi}
+            for tr, we, fi in zip(
+                x[:, EK.X_TRACK].tolist(), x[:, EK.X_WEAR].tolist(), x[:, EK.X_FINAL].tolist()
+            )
+        ]
         if np.count_nonzero(trunc):  # a quarter of the time of trunc.any() for 256 envs
             ended = np.flatnonzero(trunc)
             for i in ended:
@@ -102,26 +124,35 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
             raise AttributeError(f"RollingDriveVecEnv has no attribute {attr_name!r}")
         idx = list(self._get_indices(indices))
         if self._per_env(attr_name) and attr_name not in self.PER_ENV_WRITABLE:
-            raise AttributeError(f"{attr_name!r} is per-env physics state, read-only (reset the "
-                                 "env to start it over); writable per env: "
-                                 f"{sorted(self.PER_ENV_WRITABLE)}, shared: "
-                                 f"{sorted(self.SHARED_WRITABLE)}")
+            raise AttributeError(
+                f"{attr_name!r} is per-env physics state, read-only (reset the "
+                "env to start it over); writable per env: "
+                f"{sorted(self.PER_ENV_WRITABLE)}, shared: "
+                f"{sorted(self.SHARED_WRITABLE)}"
+            )
         if attr_name == "max_episode_steps":
             value = check_time_limit(value, self.core.scene)
         elif attr_name == "target":  # the same check as reset(options={"target": ...})
             value = target_option(self.core.scene, {"target": value}, name="target")
         elif attr_name == "steps":  # ticks into the episode: the env truncates at the limit
             limit = self.core.max_episode_steps
-            if (isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral)
-                    or not 0 <= value < limit):
-                raise ValueError(f"steps must be an integer in [0, {limit - 1}] (ticks into the "
-                                 f"episode, below max_episode_steps = {limit}), got {value!r}")
+            if (
+                isinstance(value, (bool, np.bool_))
+                or not isinstance(value, numbers.Integral)
+                or not 0 <= value < limit
+            ):
+                raise ValueError(
+                    f"steps must be an integer in [0, {limit - 1}] (ticks into the "
+                    f"episode, below max_episode_steps = {limit}), got {value!r}"
+                )
             value = int(value)
         elif attr_name == "rngs":  # the env's random generator (reset draws targets from it)
             if not isinstance(value, np.random.Generator):
-                raise ValueError("rngs must be a numpy.random.Generator (e.g. "
-                                 "numpy.random.default_rng(seed); or use seed()), got "
-                                 f"{type(value).__name__}")
+                raise ValueError(
+                    "rngs must be a numpy.random.Generator (e.g. "
+                    "numpy.random.default_rng(seed); or use seed()), got "
+                    f"{type(value).__name__}"
+                )
         if self._per_env(attr_name):
             target = getattr(self.core, attr_name)
             if isinstance(target, list):
@@ -132,14 +163,18 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
         elif attr_name not in self.SHARED_WRITABLE:
             # the scene, its kernel constants and the array sizes are fixed at construction:
             # setting them would leave the physics on the old values (or the arrays too short)
-            raise AttributeError(f"{attr_name!r} is fixed when the batch is built (make a new "
-                                 f"env to change it); writable: {sorted(self.SHARED_WRITABLE)} "
-                                 f"and per env {sorted(self.PER_ENV_WRITABLE)}")
+            raise AttributeError(
+                f"{attr_name!r} is fixed when the batch is built (make a new "
+                f"env to change it); writable: {sorted(self.SHARED_WRITABLE)} "
+                f"and per env {sorted(self.PER_ENV_WRITABLE)}"
+            )
         elif sorted(idx) == list(range(self.num_envs)):
             setattr(self.core, attr_name, value)
         else:
-            raise NotImplementedError(f"{attr_name!r} is shared by every env of the batch; "
-                                      "set it for all envs (indices=None)")
+            raise NotImplementedError(
+                f"{attr_name!r} is shared by every env of the batch; "
+                "set it for all envs (indices=None)"
+            )
 
     def env_method(self, method_name, *method_args, indices=None, **method_kwargs):
         """Call a ``BatchCore`` method once for the batch.  ``reset`` acts as the single env's
@@ -147,6 +182,7 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
         ``(obs, info)`` (as DummyVecEnv does); another method with a ``mask`` argument gets the
         mask of ``indices``; others need every env (indices=None)."""
         import inspect
+
         idx = list(self._get_indices(indices))
         if method_name == "reset":
             return self._reset_envs(idx, *method_args, **method_kwargs)
@@ -158,8 +194,10 @@ class RollingDriveVecEnv(_sb3_vecenv_base()):
         elif sorted(idx) == list(range(self.num_envs)):
             result = fn(*method_args, **method_kwargs)
         else:
-            raise NotImplementedError(f"BatchCore.{method_name} acts on the whole batch; call "
-                                      "it for all envs (indices=None)")
+            raise NotImplementedError(
+                f"BatchCore.{method_name} acts on the whole batch; call "
+                "it for all envs (indices=None)"
+            )
         return [result for _ in idx]
 
     def _reset_envs(self, idx, seed=None, options=None) -> list:

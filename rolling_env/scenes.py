@@ -5,6 +5,7 @@ Unknown keys, missing keys, wrong types and out-of-range values are rejected wit
 that names the key and its allowed range; keyword overrides (``gym.make(..., mu=0.1)``)
 follow the same checks.  ``.inf`` (YAML) or the string ``"inf"`` means infinity where allowed.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -16,7 +17,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
 import yaml
 
 from .validation import check_range
@@ -34,35 +34,35 @@ class Scene:
     name: str
     description: str
     # contact physics
-    R: float                 # sphere radius [m]
-    E_star: float            # effective Young modulus [Pa]
-    G_star: float            # effective shear modulus [Pa]
-    mu: float                # Coulomb friction coefficient [-] (inf: no slip)
-    runner_mass: float       # [kg] (0: massless runner)
-    F_ext: float             # constant load on the runner [N] (positive along +x)
+    R: float  # sphere radius [m]
+    E_star: float  # effective Young modulus [Pa]
+    G_star: float  # effective shear modulus [Pa]
+    mu: float  # Coulomb friction coefficient [-] (inf: no slip)
+    runner_mass: float  # [kg] (0: massless runner)
+    F_ext: float  # constant load on the runner [N] (positive along +x)
     # actuators
-    N_min: float             # smallest normal force the action can ask for [N]
-    N_max: float             # largest normal force [N]
-    omega_R_max: float       # largest rolling rate |omega R| [m/s]
-    creep_max: float         # largest |1 - v/(omega R)| the action can ask for [-]
-    stroke_roll: float       # rolling travel limit: |integral omega R dt| <= stroke_roll [m]
+    N_min: float  # smallest normal force the action can ask for [N]
+    N_max: float  # largest normal force [N]
+    omega_R_max: float  # largest rolling rate |omega R| [m/s]
+    creep_max: float  # largest |1 - v/(omega R)| the action can ask for [-]
+    stroke_roll: float  # rolling travel limit: |integral omega R dt| <= stroke_roll [m]
     stroke_translate: float  # translation travel limit: |integral v dt| <= stroke_translate [m]
     # numerics and timing
-    period: float            # nominal excitation period tau [s] (time scale of the task)
-    ticks_per_period: int    # control ticks per nominal period
-    sub_steps: int | str     # physics sub-steps per control tick, or "auto" (``n_sub``)
-    resolution: float        # cells per contact radius at N_max
+    period: float  # nominal excitation period tau [s] (time scale of the task)
+    ticks_per_period: int  # control ticks per nominal period
+    sub_steps: int | str  # physics sub-steps per control tick, or "auto" (``n_sub``)
+    resolution: float  # cells per contact radius at N_max
     # task
-    episode_steps: int       # control ticks per episode (the env truncates there)
-    target_min: float        # smallest |target displacement| sampled at reset [m]
-    target_max: float        # largest |target displacement| [m]
+    episode_steps: int  # control ticks per episode (the env truncates there)
+    target_min: float  # smallest |target displacement| sampled at reset [m]
+    target_max: float  # largest |target displacement| [m]
     target_both_signs: bool  # sample the target's sign too
-    tolerance: float         # |error| counted as "at the target" [m]
-    w_track: float           # weight of the tracking term (per tick, on |error|/target_max)
-    w_wear: float            # weight of the wear term (per tick, on slip work / wear_ref)
+    tolerance: float  # |error| counted as "at the target" [m]
+    w_track: float  # weight of the tracking term (per tick, on |error|/target_max)
+    w_wear: float  # weight of the wear term (per tick, on slip work / wear_ref)
     accuracy: float = DEFAULT_ACCURACY  # relative error "auto" sub-steps aim at [-]
     grid_levels: int = DEFAULT_GRID_LEVELS  # times the cells may halve for a smaller contact
-    w_final: float = 0.0     # weight of the terminal term (last tick, on |error|/tolerance)
+    w_final: float = 0.0  # weight of the terminal term (last tick, on |error|/tolerance)
     # physics drawn per episode: ((key, low, high), ...) of RANDOMIZABLE keys (single envs)
     randomize: tuple = ()
 
@@ -138,11 +138,17 @@ def _coerce(key, value):
     if key in ("name", "description"):
         if not isinstance(value, str):
             raise ValueError(f"scene key '{key}' must be a string, got {type(value).__name__}")
-        if key == "name" and (not value or value.startswith(".") or len(value) > 100
-                              or any(ch in value for ch in "/\\\0")):
+        if key == "name" and (
+            not value
+            or value.startswith(".")
+            or len(value) > 100
+            or any(ch in value for ch in "/\\\0")
+        ):
             # output files are named after the scene: it must stay one file name
-            raise ValueError("scene key 'name' must be a file name: 1 to 100 characters, no "
-                             f"'/', '\\' or NUL, not starting with '.', got {value!r}")
+            raise ValueError(
+                "scene key 'name' must be a file name: 1 to 100 characters, no "
+                f"'/', '\\' or NUL, not starting with '.', got {value!r}"
+            )
         return value
     if key == "randomize":
         return _coerce_randomize(value)
@@ -198,16 +204,21 @@ def _coerce_randomize(value) -> tuple:
     if isinstance(value, dict):
         items = list(value.items())
     elif isinstance(value, (list, tuple)) and all(
-            isinstance(t, (list, tuple)) and len(t) == 3 for t in value):
+        isinstance(t, (list, tuple)) and len(t) == 3 for t in value
+    ):
         items = [(t[0], (t[1], t[2])) for t in value]
     else:
-        raise ValueError("scene key 'randomize' must be a mapping of key: [low, high] with "
-                         f"keys among {', '.join(RANDOMIZABLE)}, got {value!r}")
+        raise ValueError(
+            "scene key 'randomize' must be a mapping of key: [low, high] with "
+            f"keys among {', '.join(RANDOMIZABLE)}, got {value!r}"
+        )
     out = []
     for k, r in items:
         if k not in RANDOMIZABLE:
-            raise ValueError(f"scene key 'randomize': {k!r} cannot be drawn per episode (one "
-                             f"of {', '.join(RANDOMIZABLE)})")
+            raise ValueError(
+                f"scene key 'randomize': {k!r} cannot be drawn per episode (one "
+                f"of {', '.join(RANDOMIZABLE)})"
+            )
         if not isinstance(r, (list, tuple)) or len(r) != 2:
             raise ValueError(f"scene key 'randomize.{k}' must be [low, high], got {r!r}")
         try:
@@ -215,11 +226,14 @@ def _coerce_randomize(value) -> tuple:
         except ValueError as e:
             raise ValueError(f"scene key 'randomize.{k}': {e}") from None
         if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
-            raise ValueError(f"scene key 'randomize.{k}' must be finite [low, high] with low "
-                             f"<= high, got [{lo:g}, {hi:g}]")
+            raise ValueError(
+                f"scene key 'randomize.{k}' must be finite [low, high] with low "
+                f"<= high, got [{lo:g}, {hi:g}]"
+            )
         if k in LOG_UNIFORM and lo <= 0.0:
-            raise ValueError(f"scene key 'randomize.{k}' is drawn log-uniformly: low must be "
-                             f"> 0, got {lo:g}")
+            raise ValueError(
+                f"scene key 'randomize.{k}' is drawn log-uniformly: low must be > 0, got {lo:g}"
+            )
         out.append((k, lo, hi))
     return tuple(sorted(out))
 
@@ -281,12 +295,15 @@ def validate(scene: Scene) -> Scene:
     if s.N_min >= s.N_max:
         raise ValueError(f"scene key 'N_min' must be < N_max = {s.N_max}, got {s.N_min}")
     if s.target_min > s.target_max:
-        raise ValueError(f"scene key 'target_min' must be <= target_max = {s.target_max}, "
-                         f"got {s.target_min}")
+        raise ValueError(
+            f"scene key 'target_min' must be <= target_max = {s.target_max}, got {s.target_min}"
+        )
     lo, hi = E_OVER_G_RANGE
     if not lo <= s.E_star / s.G_star <= hi:
-        raise ValueError(f"scene keys 'E_star' and 'G_star' must have a ratio E_star/G_star in "
-                         f"[{lo:g}, {hi:g}], got {s.E_star / s.G_star:.3g}")
+        raise ValueError(
+            f"scene keys 'E_star' and 'G_star' must have a ratio E_star/G_star in "
+            f"[{lo:g}, {hi:g}], got {s.E_star / s.G_star:.3g}"
+        )
     # the least force the contact holds; no contact (N_min = 0) holds none, also with mu = inf
     hold = s.mu * s.N_min if s.N_min > 0.0 else 0.0
     if s.runner_mass == 0.0 and s.F_ext != 0.0 and not abs(s.F_ext) < hold:
@@ -294,32 +311,40 @@ def validate(scene: Scene) -> Scene:
         # (|F_ext| <= mu N); the env kernel does not report the sliding case (it would step on
         # with a meaningless velocity), so a scene must exclude it for every action: the least
         # force the contact can hold is mu N_min
-        raise ValueError(f"scene key 'F_ext' must satisfy |F_ext| < mu N_min = "
-                         f"{hold:.6g} N when runner_mass is 0, got {s.F_ext:g} N (a "
-                         "loaded massless runner has no force equilibrium once the contact "
-                         "slides, and the env cannot report that case): give the runner a "
-                         "mass > 0, raise N_min or mu, or lower |F_ext|")
+        raise ValueError(
+            f"scene key 'F_ext' must satisfy |F_ext| < mu N_min = "
+            f"{hold:.6g} N when runner_mass is 0, got {s.F_ext:g} N (a "
+            "loaded massless runner has no force equilibrium once the contact "
+            "slides, and the env cannot report that case): give the runner a "
+            "mass > 0, raise N_min or mu, or lower |F_ext|"
+        )
     if s.randomize:
         import itertools
+
         for k, lo, hi in s.randomize:
             nominal = getattr(s, k)
             if not lo <= nominal <= hi:
-                raise ValueError(f"scene key '{k}' = {nominal:g} (the nominal value the "
-                                 f"baselines design for) must lie in its randomize range "
-                                 f"[{lo:g}, {hi:g}]")
+                raise ValueError(
+                    f"scene key '{k}' = {nominal:g} (the nominal value the "
+                    f"baselines design for) must lie in its randomize range "
+                    f"[{lo:g}, {hi:g}]"
+                )
         keys = [k for k, _, _ in s.randomize]
         for corner in itertools.product(*[(lo, hi) for _, lo, hi in s.randomize]):
             draw = dict(zip(keys, corner))
             try:
                 validate(episode_scene(s, draw))
             except ValueError as e:
-                raise ValueError(f"scene key 'randomize': the draw {draw} gives an invalid "
-                                 f"scene: {e}") from None
+                raise ValueError(
+                    f"scene key 'randomize': the draw {draw} gives an invalid scene: {e}"
+                ) from None
     a_max = math.sqrt(s.R * (3 * s.N_max / (4 * s.E_star * math.sqrt(s.R))) ** (2 / 3))
     if a_max > 0.5 * s.R:
-        raise ValueError(f"scene keys 'N_max', 'E_star' and 'R' give a contact radius "
-                         f"{a_max:.3g} m > R/2 = {0.5 * s.R:.3g} m at N_max: outside the "
-                         "small-strain contact theory (lower N_max or raise E_star or R)")
+        raise ValueError(
+            f"scene keys 'N_max', 'E_star' and 'R' give a contact radius "
+            f"{a_max:.3g} m > R/2 = {0.5 * s.R:.3g} m at N_max: outside the "
+            "small-strain contact theory (lower N_max or raise E_star or R)"
+        )
     return s
 
 
@@ -329,8 +354,10 @@ def load_scene(scene: str | os.PathLike | dict | Scene = "default", **overrides)
     if isinstance(scene, Scene):  # checked again: a Scene can be built or replaced unchecked
         scene = dataclasses.asdict(scene)
     if not isinstance(scene, (str, os.PathLike, dict)):
-        raise ValueError(f"scene must be a shipped scene name ({', '.join(list_scenes())}), a "
-                         f"path to a YAML file, a dict or a Scene, got {scene!r}")
+        raise ValueError(
+            f"scene must be a shipped scene name ({', '.join(list_scenes())}), a "
+            f"path to a YAML file, a dict or a Scene, got {scene!r}"
+        )
     if isinstance(scene, dict):
         raw = dict(scene)
         src = "<dict>"
@@ -339,8 +366,10 @@ def load_scene(scene: str | os.PathLike | dict | Scene = "default", **overrides)
         if path.suffix.lower() not in (".yaml", ".yml"):
             path = SCENE_DIR / f"{scene}.yaml"
             if not path.exists():
-                raise ValueError(f"unknown scene {scene!r}; shipped scenes: "
-                                 f"{', '.join(list_scenes())} (or give a path to a .yaml file)")
+                raise ValueError(
+                    f"unknown scene {scene!r}; shipped scenes: "
+                    f"{', '.join(list_scenes())} (or give a path to a .yaml file)"
+                )
         if not path.exists():
             raise ValueError(f"scene file {str(path)!r} does not exist")
         raw = read_yaml(path)
@@ -375,7 +404,8 @@ class _UniqueKeyLoader(yaml.SafeLoader):
                     continue
                 if dup:
                     raise yaml.constructor.ConstructorError(
-                        None, None, f"duplicate key {key!r}", key_node.start_mark)
+                        None, None, f"duplicate key {key!r}", key_node.start_mark
+                    )
                 seen.add(key)
         return super().construct_mapping(node, deep=deep)
 
@@ -383,7 +413,8 @@ class _UniqueKeyLoader(yaml.SafeLoader):
 _UniqueKeyLoader.add_implicit_resolver(  # copied per class by PyYAML: SafeLoader is unchanged
     "tag:yaml.org,2002:float",
     re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
-    list("-+0123456789."))
+    list("-+0123456789."),
+)
 
 
 def read_yaml(path, what: str = "scene file"):
@@ -398,11 +429,13 @@ def read_yaml(path, what: str = "scene file"):
         msg = " ".join(str(e).split())
         raise ValueError(f"{what} {str(path)!r} is not valid YAML: {msg}") from None
     except UnicodeDecodeError as e:
-        raise ValueError(f"{what} {str(path)!r} is not UTF-8 text (byte {e.start}: "
-                         f"{e.reason})") from None
+        raise ValueError(
+            f"{what} {str(path)!r} is not UTF-8 text (byte {e.start}: {e.reason})"
+        ) from None
     except OSError as e:  # a folder, no permission, ...
-        raise ValueError(f"{what} {str(path)!r} cannot be read: "
-                         f"{e.strerror or e.__class__.__name__}") from None
+        raise ValueError(
+            f"{what} {str(path)!r} cannot be read: {e.strerror or e.__class__.__name__}"
+        ) from None
 
 
 def list_scenes() -> list[str]:

@@ -30,6 +30,7 @@ stay numba's (``NUMBA_THREADING_LAYER``, ``OMP_WAIT_POLICY``: nothing here sets 
 ``PARALLEL_MIN_ENVS`` envs the default runs the serial kernel only: the threads never paid
 there on the 2-core machine (0.61-0.63x at 1 env, 0.90-0.98x at 4).
 """
+
 from __future__ import annotations
 
 import math
@@ -46,16 +47,33 @@ from gymnasium.utils import seeding
 
 from . import _envkernel as EK
 from . import _kernel as K
-from .env import (OBS_NAMES, build_drive, check_action_dtype, check_actions, check_time_limit,
-                  info_arrays, info_dict, load_actions, raise_step_error, sample_target,
-                  target_option)
+from .env import (
+    OBS_NAMES,
+    build_drive,
+    check_action_dtype,
+    check_actions,
+    check_time_limit,
+    info_arrays,
+    info_dict,
+    load_actions,
+    raise_step_error,
+    sample_target,
+    target_option,
+)
 from .model import CellViews
 from .scenes import load_scene
 
 PARALLEL_MIN_ENVS = 6
 
-__all__ = ["BatchCore", "RollingDriveVectorEnv", "RollingDriveVecEnv", "make_vector_env",
-           "PARALLEL_MIN_ENVS", "ThreadPolicy", "check_num_threads"]
+__all__ = [
+    "BatchCore",
+    "RollingDriveVectorEnv",
+    "RollingDriveVecEnv",  # noqa: F822 (module __getattr__ below)
+    "make_vector_env",
+    "PARALLEL_MIN_ENVS",
+    "ThreadPolicy",
+    "check_num_threads",
+]
 
 
 def _check_seed(seed, name: str) -> int:
@@ -85,12 +103,14 @@ def _check_memory(n: int, cell_bytes: int, scene) -> None:
             f"(resolution = {scene.resolution!r}, grid_levels = {scene.grid_levels!r}, "
             f"stroke_roll = {scene.stroke_roll!r}) need {need / 2**30:.3g} GiB, more than this "
             f"machine's {have / 2**30:.3g} GiB: lower num_envs, or the scene's resolution, "
-            "grid_levels or stroke")
+            "grid_levels or stroke"
+        )
 
 
 def max_threads() -> int:
     """The most threads the threaded kernel can use: numba's NUMBA_NUM_THREADS."""
     import numba
+
     return int(numba.config.NUMBA_NUM_THREADS)
 
 
@@ -100,16 +120,22 @@ def check_num_threads(num_threads, name: str = "num_threads"):
     if num_threads is None:
         return None
     hi = max_threads()
-    if (isinstance(num_threads, (bool, np.bool_)) or not isinstance(num_threads, numbers.Integral)
-            or not 1 <= num_threads <= hi):
-        raise ValueError(f"{name} must be None (chosen at run time) or an integer in [1, {hi}] "
-                         f"(1: serial kernel; at most numba's NUMBA_NUM_THREADS), got "
-                         f"{num_threads!r}")
+    if (
+        isinstance(num_threads, (bool, np.bool_))
+        or not isinstance(num_threads, numbers.Integral)
+        or not 1 <= num_threads <= hi
+    ):
+        raise ValueError(
+            f"{name} must be None (chosen at run time) or an integer in [1, {hi}] "
+            f"(1: serial kernel; at most numba's NUMBA_NUM_THREADS), got "
+            f"{num_threads!r}"
+        )
     return int(num_threads)
 
 
 def _callers_threads() -> int:
     import numba
+
     return numba.get_num_threads()
 
 
@@ -133,6 +159,7 @@ def _threaded_step(threads: int, *args):
     other numba code keeps its own setting (setting it inside the kernel would make numba
     refuse to cache it).  Both calls are skipped where the count is already right."""
     import numba
+
     before = numba.get_num_threads()
     if before == threads:
         return EK.env_step_parallel(*args)
@@ -185,18 +212,18 @@ class ThreadPolicy:
     ``clock`` (seconds) can be replaced, e.g. by a test, which may also drive ``next`` and
     ``done`` itself."""
 
-    PROBE = 4            # timed steps of a probe at least
-    WINDOW = 16          # recent steps of the current choice kept at least
-    SPAN = 0.025         # seconds a probe and the current choice's steps kept span at least
-    RENEW = 8            # steps between two renewals of the current choice's estimate
-    PAUSE = 4            # a longer time between steps counts as this many step times
-    BUDGET = 0.01        # most of the time that probing a slower choice may cost
-    MIN_STEPS = 32       # steps between two probes of one choice at least
-    GUARD = 1.25         # another choice this much faster than the current: probe it soon
+    PROBE = 4  # timed steps of a probe at least
+    WINDOW = 16  # recent steps of the current choice kept at least
+    SPAN = 0.025  # seconds a probe and the current choice's steps kept span at least
+    RENEW = 8  # steps between two renewals of the current choice's estimate
+    PAUSE = 4  # a longer time between steps counts as this many step times
+    BUDGET = 0.01  # most of the time that probing a slower choice may cost
+    MIN_STEPS = 32  # steps between two probes of one choice at least
+    GUARD = 1.25  # another choice this much faster than the current: probe it soon
     GUARD_BUDGET = 0.05  # most of the time its probes may cost then
-    SETTLE = 0.01        # seconds after leaving threads during which steps are not timed,
-                         # at least (see _settled)
-    RETURNS = 5          # recent costs of the way back from a probe kept (their median counts)
+    SETTLE = 0.01  # seconds after leaving threads during which steps are not timed,
+    # at least (see _settled)
+    RETURNS = 5  # recent costs of the way back from a probe kept (their median counts)
 
     def __init__(self, choices, clock=time.perf_counter):
         self.choices = tuple(int(k) for k in choices)
@@ -206,27 +233,27 @@ class ThreadPolicy:
         self._kernels = [_kernel_for(k) for k in self.choices]
         n = len(self.choices)
         self.estimate = [math.nan] * n  # seconds per step of each choice, as last measured
-        self.current = 0                # index of the choice in use; starts serial
-        self.probing = None             # index of the choice under probe, or None
-        self.steps = 0                  # steps started
-        self.probes = 0                 # probes started
-        self.switches = 0               # times the current choice changed
-        self._probe = [0.0, 0]          # (seconds, steps) of the running probe's timed steps
-        self._probe_spent = [0.0, 0]    # (seconds, steps) of the running probe, untimed too
-        self._window = deque()          # step times of the current choice, oldest first
+        self.current = 0  # index of the choice in use; starts serial
+        self.probing = None  # index of the choice under probe, or None
+        self.steps = 0  # steps started
+        self.probes = 0  # probes started
+        self.switches = 0  # times the current choice changed
+        self._probe = [0.0, 0]  # (seconds, steps) of the running probe's timed steps
+        self._probe_spent = [0.0, 0]  # (seconds, steps) of the running probe, untimed too
+        self._window = deque()  # step times of the current choice, oldest first
         self._window_sum = 0.0
-        self._fresh = 0                 # timed steps of the current choice since a probe
-        self._left = [0] * n            # step at which each choice last ran
-        self._spent = [(0.0, 0)] * n    # (seconds, steps) of each choice's last probe
-        self._due = [0] * n             # step from which each choice may be probed
+        self._fresh = 0  # timed steps of the current choice since a probe
+        self._left = [0] * n  # step at which each choice last ran
+        self._spent = [(0.0, 0)] * n  # (seconds, steps) of each choice's last probe
+        self._due = [0] * n  # step from which each choice may be probed
         self._next_due = 0 if n > 1 else math.inf  # the earliest of another choice's
-        self._urgent = None             # a choice to probe at once (see _watch_step)
-        self._watch = None              # after a switch: [choice left, its estimate, sum, n]
+        self._urgent = None  # a choice to probe at once (see _watch_step)
+        self._watch = None  # after a switch: [choice left, its estimate, sum, n]
         self._returns = deque(maxlen=self.RETURNS)  # excess seconds of the way back
-        self._returning = None          # excess seconds of the way back so far, or None
-        self._return_cost = 0.0         # the median of _returns
-        self._settle_end = None         # while threads left may spin: the earliest end
-        self._settle_limit = 0.0        # and the latest
+        self._returning = None  # excess seconds of the way back so far, or None
+        self._return_cost = 0.0  # the median of _returns
+        self._settle_end = None  # while threads left may spin: the earliest end
+        self._settle_limit = 0.0  # and the latest
         self._start = self._end = None  # clock at the previous step's start and end
         self._prev = self._before = -1  # choices of the previous step and the one before
 
@@ -245,18 +272,22 @@ class ThreadPolicy:
             gap = now - end
             step = end - self._start + (gap if not gap > self.PAUSE * t else self.PAUSE * t)
             timed = prev == self._before and (self._settle_end is None or self._settled(step))
-            if (timed and prev == self.current and self._returning is None
-                    and self._watch is None):
+            if timed and prev == self.current and self._returning is None and self._watch is None:
                 self._add(step)  # the common case, kept short
             else:
                 self._record(prev, step, timed)
         if self.probing is not None:
             seconds, timed = self._probe
-            if ((timed >= self.PROBE and seconds >= self.SPAN)
-                    or (timed >= 1 and self._probe_too_dear(seconds, timed))):
+            if (timed >= self.PROBE and seconds >= self.SPAN) or (
+                timed >= 1 and self._probe_too_dear(seconds, timed)
+            ):
                 self._decide(now)
-        if (self.steps >= self._next_due and self.probing is None and self._returning is None
-                and self._fresh >= self.PROBE):
+        if (
+            self.steps >= self._next_due
+            and self.probing is None
+            and self._returning is None
+            and self._fresh >= self.PROBE
+        ):
             j = min((d, j) for j, d in enumerate(self._due) if j != self.current)[1]
             self.estimate[self.current] = self._window_sum / len(self._window)
             self.probing = j
@@ -325,8 +356,9 @@ class ThreadPolicy:
         times the choice's estimate; on a crowded host a spinning thread may have to wait
         for a core before it spins on, so the wait ends at ``10 SETTLE`` at the latest."""
         e = self.estimate[self._prev]
-        if self._start >= self._settle_limit or (self._start >= self._settle_end
-                                                 and not step > self.GUARD * e):
+        if self._start >= self._settle_limit or (
+            self._start >= self._settle_end and not step > self.GUARD * e
+        ):
             self._settle_end = None
             return True
         return False
@@ -413,13 +445,35 @@ class BatchCore(CellViews):
     threads.  ``threads`` says what the batch steps on now."""
 
     #: attributes holding one entry per env (leading axis num_envs); the rest is shared
-    PER_ENV = frozenset({"cells", "U", "A", "B", "L", "st", "p", "target", "steps", "act",
-                         "out", "obs", "extra", "rew", "trunc", "rngs"})
+    PER_ENV = frozenset(
+        {
+            "cells",
+            "U",
+            "A",
+            "B",
+            "L",
+            "st",
+            "p",
+            "target",
+            "steps",
+            "act",
+            "out",
+            "obs",
+            "extra",
+            "rew",
+            "trunc",
+            "rngs",
+        }
+    )
 
-    def __init__(self, num_envs: int, scene="default", max_episode_steps=None, num_threads=None,
-                 **overrides):
-        if (isinstance(num_envs, (bool, np.bool_)) or not isinstance(num_envs, numbers.Integral)
-                or num_envs < 1):
+    def __init__(
+        self, num_envs: int, scene="default", max_episode_steps=None, num_threads=None, **overrides
+    ):
+        if (
+            isinstance(num_envs, (bool, np.bool_))
+            or not isinstance(num_envs, numbers.Integral)
+            or num_envs < 1
+        ):
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         n = int(num_envs)
         self.num_threads = check_num_threads(num_threads)
@@ -427,10 +481,12 @@ class BatchCore(CellViews):
         self.scene = load_scene(scene, **overrides)
         if self.scene.randomize:  # one compiled call steps one physics for the whole batch
             keys = ", ".join(k for k, _, _ in self.scene.randomize)
-            raise ValueError(f"scene {self.scene.name!r} draws {keys} per episode (randomize): "
-                             "the batched envs step one physics for all envs; use single "
-                             "envs (gym.make, make_vec(..., vectorization_mode='sync'), SB3's "
-                             "DummyVecEnv: agents.train --vec-env dummy)")
+            raise ValueError(
+                f"scene {self.scene.name!r} draws {keys} per episode (randomize): "
+                "the batched envs step one physics for all envs; use single "
+                "envs (gym.make, make_vec(..., vectorization_mode='sync'), SB3's "
+                "DummyVecEnv: agents.train --vec-env dummy)"
+            )
         self.max_episode_steps = check_time_limit(max_episode_steps, self.scene)
         drive, self.a_max = build_drive(self.scene)
         self.drive = drive  # template (grid, scales)
@@ -476,10 +532,13 @@ class BatchCore(CellViews):
             seed = seed.item()
         if isinstance(seed, (list, tuple, np.ndarray)):
             if len(seed) != self.num_envs:
-                raise ValueError(f"seed must be an int, None or a sequence of num_envs = "
-                                 f"{self.num_envs} seeds, got {len(seed)} seeds")
-            seeds = [None if s is None else _check_seed(s, f"seed[{i}]")
-                     for i, s in enumerate(seed)]
+                raise ValueError(
+                    f"seed must be an int, None or a sequence of num_envs = "
+                    f"{self.num_envs} seeds, got {len(seed)} seeds"
+                )
+            seeds = [
+                None if s is None else _check_seed(s, f"seed[{i}]") for i, s in enumerate(seed)
+            ]
             for i, s in enumerate(seeds):
                 if s is not None:
                     self.rngs[i] = seeding.np_random(s)[0]
@@ -494,8 +553,10 @@ class BatchCore(CellViews):
         if mask is not None:
             m = np.asarray(mask)
             if m.dtype != np.bool_ or m.shape != (self.num_envs,):
-                raise ValueError(f"mask must be None or a bool array of shape "
-                                 f"({self.num_envs},) (True: reset that env), got {mask!r}")
+                raise ValueError(
+                    f"mask must be None or a bool array of shape "
+                    f"({self.num_envs},) (True: reset that env), got {mask!r}"
+                )
         idx = np.arange(self.num_envs) if mask is None else np.flatnonzero(mask)
         # every env's options checked before any env changes: a bad one resets nothing
         given = self.check_options(options, idx)
@@ -515,8 +576,10 @@ class BatchCore(CellViews):
         None).  Raises before anything changes."""
         per_env = isinstance(options, (list, tuple, np.ndarray))
         if per_env and len(options) != self.num_envs:
-            raise ValueError(f"options must be a dict or a sequence of num_envs = "
-                             f"{self.num_envs} dicts, got {len(options)}")
+            raise ValueError(
+                f"options must be a dict or a sequence of num_envs = "
+                f"{self.num_envs} dicts, got {len(options)}"
+            )
         idx = range(self.num_envs) if idx is None else idx
         return [target_option(self.scene, options[i] if per_env else options) for i in idx]
 
@@ -525,9 +588,22 @@ class BatchCore(CellViews):
         a = load_actions(actions, (self.num_envs, 3), self.act)
         policy = self._step_fn if self._step_fn is self.thread_policy else None
         fn = self._step_fn if policy is None else policy.kernel()
-        bad = fn(self.act, self.sv, self.target, self.steps, self.cells, self.st, self.p,
-                 self.out, self.obs, self.extra, self.rew, self.trunc, self.max_episode_steps,
-                 *self.features)
+        bad = fn(
+            self.act,
+            self.sv,
+            self.target,
+            self.steps,
+            self.cells,
+            self.st,
+            self.p,
+            self.out,
+            self.obs,
+            self.extra,
+            self.rew,
+            self.trunc,
+            self.max_episode_steps,
+            *self.features,
+        )
         if policy is not None:
             policy.done()
         if bad:
@@ -549,6 +625,7 @@ def make_vector_env(num_envs: int = 1, max_episode_steps=None, **kwargs):
 
 def _gym_vector_base():
     from gymnasium.vector import VectorEnv
+
     return VectorEnv
 
 
@@ -603,25 +680,35 @@ class RollingDriveVectorEnv(_gym_vector_base()):
         return self.core.obs.copy(), self._infos(mask)
 
     def _reset_mask(self, m) -> np.ndarray:
-        if not (isinstance(m, np.ndarray) and m.dtype == np.bool_ and m.shape == (self.num_envs,)
-                and m.any()):
-            raise ValueError(f"options['reset_mask'] must be a numpy bool array of shape "
-                             f"({self.num_envs},) with at least one True, got {m!r}")
+        if not (
+            isinstance(m, np.ndarray)
+            and m.dtype == np.bool_
+            and m.shape == (self.num_envs,)
+            and m.any()
+        ):
+            raise ValueError(
+                f"options['reset_mask'] must be a numpy bool array of shape "
+                f"({self.num_envs},) with at least one True, got {m!r}"
+            )
         return m.copy()
 
     def step(self, actions):
         if self._any_not_reset:  # as gym.make's OrderEnforcing does for each env of "sync"
             from gymnasium.error import ResetNeeded
-            raise ResetNeeded(f"Cannot call step() before reset(): env(s) "
-                              f"{np.flatnonzero(self._not_reset).tolist()[:10]} were never "
-                              "reset")
+
+            raise ResetNeeded(
+                f"Cannot call step() before reset(): env(s) "
+                f"{np.flatnonzero(self._not_reset).tolist()[:10]} were never "
+                "reset"
+            )
         actions = check_action_dtype(actions)  # range and finiteness are checked by core.step
         if actions.shape != (self.num_envs, 3):  # before np.where below could broadcast it
             check_actions(actions, (self.num_envs, 3))  # raises naming the shape
         was_done = self._autoreset.copy()
         any_done = np.count_nonzero(was_done) > 0  # a quarter of the time of .any() here
-        obs, rew, trunc = self.core.step(np.where(was_done[:, None], 0.0, actions)
-                                         if any_done else actions)
+        obs, rew, trunc = self.core.step(
+            np.where(was_done[:, None], 0.0, actions) if any_done else actions
+        )
         if any_done:
             self.core.reset(was_done)  # the envs that ended last step start over instead
             obs = self.core.obs.copy()
@@ -653,5 +740,6 @@ def __getattr__(name):
     torch, which ``gym.make_vec`` does not need: 1.3 s and ~300 MiB); imported on first use."""
     if name == "RollingDriveVecEnv":
         from .sb3_vec import RollingDriveVecEnv
+
         return RollingDriveVecEnv
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,4 +1,5 @@
 """Make tests/naive.py (the plain-numpy reference kernel) importable as ``naive``."""
+
 import sys
 from pathlib import Path
 

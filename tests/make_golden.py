@@ -9,6 +9,7 @@ tests check every reported quantity from its definition.  Record it again, with 
 ``NUMBA_CACHE_DIR``, only for a change of the transitions that is meant, and say why in the
 commit.
 """
+
 from __future__ import annotations
 
 import sys
@@ -23,6 +24,7 @@ def record(scene: str) -> dict:
     """Observations, rewards and the numeric info values of one seeded single env driven by
     pre-sampled uniform actions (``STEPS`` steps, no reset on the way)."""
     import rolling_env
+
     env = rolling_env.make(scene)
     obs, _ = env.reset(seed=SEED)
     acts = np.random.default_rng(SEED).uniform(-1, 1, (STEPS, 3)).astype(np.float32)
@@ -40,6 +42,7 @@ def record(scene: str) -> dict:
 
 def main(out: str) -> None:
     import rolling_env
+
     data = {}
     for scene in rolling_env.list_scenes():
         for k, v in record(scene).items():

@@ -6,6 +6,7 @@ iff its centre is (uN_i = d - (x_i - c)^2 / R > 0). Readable rather than fast; n
 float64 throughout. The fast kernel is tested against this, and it is a line on the
 work-precision plot.
 """
+
 from __future__ import annotations
 
 import math
@@ -32,8 +33,26 @@ def _bisect(residual, lo, hi):
     return 0.5 * (lo + hi)
 
 
-def naive_run(*, R, E_star, G_star, mu, m, F_ext, x_lo, x_hi, dx,
-              d, omegaR, v, vstar, dt_tick, n_sub, c0=0.0, vstar0=0.0):
+def naive_run(  # noqa: C901 (the reference is deliberately one plain loop)
+    *,
+    R,
+    E_star,
+    G_star,
+    mu,
+    m,
+    F_ext,
+    x_lo,
+    x_hi,
+    dx,
+    d,
+    omegaR,
+    v,
+    vstar,
+    dt_tick,
+    n_sub,
+    c0=0.0,
+    vstar0=0.0,
+):
     """d, omegaR, v, vstar: 1-D arrays, one value per control tick (piecewise constant).
     vstar is used only when m is inf (prescribed runner velocity); ignored otherwise.
     F_ext: scalar or one value per tick. Returns a dict of 1-D arrays, one entry per tick,
@@ -51,21 +70,39 @@ def naive_run(*, R, E_star, G_star, mu, m, F_ext, x_lo, x_hi, dx,
       'runner_work' cumulative integral of T*vstar dt [J]
     and 'uT' final array, 'x' spring positions."""
     # ---- input validation ------------------------------------------------------------
-    scalars = dict(R=R, E_star=E_star, G_star=G_star, mu=mu, m=m, x_lo=x_lo, x_hi=x_hi,
-                   dx=dx, dt_tick=dt_tick, c0=c0, vstar0=vstar0)
+    scalars = dict(
+        R=R,
+        E_star=E_star,
+        G_star=G_star,
+        mu=mu,
+        m=m,
+        x_lo=x_lo,
+        x_hi=x_hi,
+        dx=dx,
+        dt_tick=dt_tick,
+        c0=c0,
+        vstar0=vstar0,
+    )
     for name, val in scalars.items():
         if np.isnan(val):
             raise ValueError(f"{name} is NaN")
-    ticks = {name: np.atleast_1d(np.asarray(a, dtype=np.float64))
-             for name, a in dict(d=d, omegaR=omegaR, v=v, vstar=vstar).items()}
+    ticks = {
+        name: np.atleast_1d(np.asarray(a, dtype=np.float64))
+        for name, a in dict(d=d, omegaR=omegaR, v=v, vstar=vstar).items()
+    }
     n_t = ticks["d"].size
-    F = np.broadcast_to(np.asarray(F_ext, dtype=np.float64), (n_t,)) if np.ndim(F_ext) == 0 \
+    F = (
+        np.broadcast_to(np.asarray(F_ext, dtype=np.float64), (n_t,))
+        if np.ndim(F_ext) == 0
         else np.asarray(F_ext, dtype=np.float64)
+    )
     ticks["F_ext"] = F
     for name, a in ticks.items():
         if a.ndim != 1 or a.size != n_t:
-            raise ValueError(f"{name} must be 1-D with one value per tick: shape {a.shape}, "
-                             f"but d has {n_t} ticks")
+            raise ValueError(
+                f"{name} must be 1-D with one value per tick: shape {a.shape}, "
+                f"but d has {n_t} ticks"
+            )
         if np.isnan(a).any():
             raise ValueError(f"{name} contains NaN")
     if not dx > 0:
@@ -93,8 +130,19 @@ def naive_run(*, R, E_star, G_star, mu, m, F_ext, x_lo, x_hi, dx,
     uT = np.zeros_like(x)
     c, vs, xs = float(c0), float(vstar0), 0.0
     slip_w = release_w = drive_w = runner_w = 0.0
-    keys = ("T", "impulse", "N", "vstar", "xstar", "c", "slip_work", "release_work",
-            "elastic", "drive_work", "runner_work")
+    keys = (
+        "T",
+        "impulse",
+        "N",
+        "vstar",
+        "xstar",
+        "c",
+        "slip_work",
+        "release_work",
+        "elastic",
+        "drive_work",
+        "runner_work",
+    )
     out = {k: np.zeros(n_t) for k in keys}
 
     for k in range(n_t):
@@ -127,29 +175,34 @@ def naive_run(*, R, E_star, G_star, mu, m, F_ext, x_lo, x_hi, dx,
                 return u_tr, u_cl, kT * np.sum(u_cl)
 
             n_c = int(contact.sum())
-            if m == np.inf:                                   # prescribed runner
+            if m == np.inf:  # prescribed runner
                 vs_new = ticks["vstar"][k]
-            elif lim is None:                                 # T affine: T0 - K dt vs_new
+            elif lim is None:  # T affine: T0 - K dt vs_new
                 T0 = kT * np.sum(np.where(contact, uT + (wR - v_k) * dt, 0.0))
                 K = kT * n_c
                 if m > 0:  # m (v1 - v0) = dt/2 (T_old + T1) + dt F, T1 = T0 - K dt (v0 + v1)/2
                     a_ = 0.5 * K * dt * dt
-                    vs_new = (m * vs + 0.5 * dt * (T_old + T0 - 0.5 * K * dt * vs) + dt * F_k
-                              ) / (m + 0.5 * a_)
+                    vs_new = (m * vs + 0.5 * dt * (T_old + T0 - 0.5 * K * dt * vs) + dt * F_k) / (
+                        m + 0.5 * a_
+                    )
                 else:
                     vs_new = T0 / (K * dt) if n_c > 0 else 0.0
-            elif m > 0:                                       # dynamics, finite friction
+            elif m > 0:  # dynamics, finite friction
                 T_max = np.sum(mu * kN * np.where(contact, uN, 0.0))
-                vs_new = _bisect(lambda s: m * (s - vs) - 0.5 * dt * (T_old + trial(s)[2])
-                                 - dt * F_k,
-                                 vs + dt * (F_k - T_max) / m, vs + dt * (F_k + T_max) / m)
-            elif n_c == 0:                                    # massless, nothing to hold it
+                vs_new = _bisect(
+                    lambda s: m * (s - vs) - 0.5 * dt * (T_old + trial(s)[2]) - dt * F_k,
+                    vs + dt * (F_k - T_max) / m,
+                    vs + dt * (F_k + T_max) / m,
+                )
+            elif n_c == 0:  # massless, nothing to hold it
                 vs_new = 0.0
-            else:                                             # massless: T(vs_new) = 0
+            else:  # massless: T(vs_new) = 0
                 base = wR - v_k + uT[contact] / dt
-                vs_new = _bisect(lambda s: -trial(s)[2],
-                                 np.min(base - lim[contact] / dt),   # all saturated at +lim
-                                 np.max(base + lim[contact] / dt))   # all saturated at -lim
+                vs_new = _bisect(
+                    lambda s: -trial(s)[2],
+                    np.min(base - lim[contact] / dt),  # all saturated at +lim
+                    np.max(base + lim[contact] / dt),
+                )  # all saturated at -lim
             # 4. commit
             u_tr, u_cl, T = trial(vs_new)
             if lim is not None:
@@ -167,7 +220,7 @@ def naive_run(*, R, E_star, G_star, mu, m, F_ext, x_lo, x_hi, dx,
         out["N"][k] = kN * np.sum(np.where(contact, uN, 0.0))
         out["vstar"][k], out["xstar"][k], out["c"][k] = vs, xs, c
         out["slip_work"][k], out["release_work"][k] = slip_w, release_w
-        out["elastic"][k] = 0.5 * kT * np.sum(uT ** 2)
+        out["elastic"][k] = 0.5 * kT * np.sum(uT**2)
         out["drive_work"][k], out["runner_work"][k] = drive_w, runner_w
     out["uT"], out["x"] = uT, x
     return out
@@ -195,55 +248,93 @@ def naive_mindlin(mu, R, E_star, G_star, d, dx, u_values):
     dt_tick = 1.0
     v = -np.diff(np.concatenate([[0.0], u])) / dt_tick
     zeros = np.zeros_like(u)
-    res = naive_run(R=R, E_star=E_star, G_star=G_star, mu=mu, m=np.inf, F_ext=0.0,
-                    x_lo=-half, x_hi=half, dx=dx, d=np.full_like(u, d), omegaR=zeros,
-                    v=v, vstar=zeros, dt_tick=dt_tick, n_sub=1)
+    res = naive_run(
+        R=R,
+        E_star=E_star,
+        G_star=G_star,
+        mu=mu,
+        m=np.inf,
+        F_ext=0.0,
+        x_lo=-half,
+        x_hi=half,
+        dx=dx,
+        d=np.full_like(u, d),
+        omegaR=zeros,
+        v=v,
+        vstar=zeros,
+        dt_tick=dt_tick,
+        n_sub=1,
+    )
     return res["T"]
 
 
 def eq32(delta, eps, w):
     """v*/(omega R) of physics.md Eq. 32."""
-    return (1 - eps) * (4 / 3 * (1 - delta ** 1.5) - 2 * w * (1 - delta)) / \
-        (4 / 3 - 4 * delta - 2 * w * (1 + delta))
+    return (
+        (1 - eps)
+        * (4 / 3 * (1 - delta**1.5) - 2 * w * (1 - delta))
+        / (4 / 3 - 4 * delta - 2 * w * (1 + delta))
+    )
 
 
-def working_point(delta, eps, w, dx_per_a, R=1e-3, E_star=115e9, G_ratio=0.824, d1=1e-7,
-                  omegaR=1e-3, periods=3):
+def working_point(
+    delta, eps, w, dx_per_a, R=1e-3, E_star=115e9, G_ratio=0.824, d1=1e-7, omegaR=1e-3, periods=3
+):
     """Quasi-static square wave (infinite friction, prescribed vstar): v*/(omega R) from the
     zero of the last period's impulse, which is affine in vstar."""
     a1 = math.sqrt(R * d1)
     dx, W = a1 / dx_per_a, w * a1
     half_tau = W / omegaR
-    n_sub = math.ceil(W / dx)                       # omegaR dt <= dx
+    n_sub = math.ceil(W / dx)  # omegaR dt <= dx
     sgn = np.tile([1.0, -1.0], periods)
-    kw = dict(R=R, E_star=E_star, G_star=G_ratio * E_star, mu=np.inf, m=np.inf, F_ext=0.0,
-              x_lo=-1.5 * a1 - 2 * dx, x_hi=W + 1.5 * a1 + 2 * dx, dx=dx,
-              d=np.where(sgn > 0, d1, delta * d1), omegaR=sgn * omegaR, v=sgn * eps * omegaR,
-              dt_tick=half_tau, n_sub=n_sub, c0=0.0)
-    imp = [naive_run(vstar=np.full(sgn.size, s), **kw)["impulse"][-2:].sum()
-           for s in (0.0, 0.1 * omegaR)]
+    kw = dict(
+        R=R,
+        E_star=E_star,
+        G_star=G_ratio * E_star,
+        mu=np.inf,
+        m=np.inf,
+        F_ext=0.0,
+        x_lo=-1.5 * a1 - 2 * dx,
+        x_hi=W + 1.5 * a1 + 2 * dx,
+        dx=dx,
+        d=np.where(sgn > 0, d1, delta * d1),
+        omegaR=sgn * omegaR,
+        v=sgn * eps * omegaR,
+        dt_tick=half_tau,
+        n_sub=n_sub,
+        c0=0.0,
+    )
+    imp = [
+        naive_run(vstar=np.full(sgn.size, s), **kw)["impulse"][-2:].sum()
+        for s in (0.0, 0.1 * omegaR)
+    ]
     return -imp[0] / ((imp[1] - imp[0]) / (0.1 * omegaR)) / omegaR
 
 
 if __name__ == "__main__":
     R, E, G, mu, d1 = 1e-3, 115e9, 0.824 * 115e9, 0.3, 1e-7
     a1 = math.sqrt(R * d1)
-    N_hertz = 4 / 3 * E * math.sqrt(R) * d1 ** 1.5
+    N_hertz = 4 / 3 * E * math.sqrt(R) * d1**1.5
     print("(1) normal force vs Hertz, N =", N_hertz, "N")
     for per_a in (50, 100):
         N = naive_normal_force(d1, R, E, a1 / per_a)
-        N_off = naive_normal_force(d1, R, E, a1 / per_a, c=0.37 * a1 / per_a,
-                                   x_lo=-1.1 * a1, x_hi=1.1 * a1)
-        print(f"    dx = a/{per_a:<3d}: rel. error {N / N_hertz - 1:+.3e} (grid centred on the"
-              f" contact), {N_off / N_hertz - 1:+.3e} (contact shifted by 0.37 dx)")
+        N_off = naive_normal_force(
+            d1, R, E, a1 / per_a, c=0.37 * a1 / per_a, x_lo=-1.1 * a1, x_hi=1.1 * a1
+        )
+        print(
+            f"    dx = a/{per_a:<3d}: rel. error {N / N_hertz - 1:+.3e} (grid centred on the"
+            f" contact), {N_off / N_hertz - 1:+.3e} (contact shifted by 0.37 dx)"
+        )
     u_star = mu * E * d1 / G
     u = np.linspace(0.0, 1.2 * u_star, 241)[1:]
     T = naive_mindlin(mu, R, E, G, d1, a1 / 100, u)
     T_ex = mu * N_hertz * (1 - np.clip(1 - u / u_star, 0.0, None) ** 1.5)
     rel = np.abs(T / T_ex - 1)
-    print(f"(2) Mindlin at dx = a/100: max rel. error {rel.max():.3e} "
-          f"(at u/u* = {u[rel.argmax()] / u_star:.3f}); "
-          f"for u/u* >= 0.1: {rel[u >= 0.1 * u_star].max():.3e}")
+    print(
+        f"(2) Mindlin at dx = a/100: max rel. error {rel.max():.3e} "
+        f"(at u/u* = {u[rel.argmax()] / u_star:.3f}); "
+        f"for u/u* >= 0.1: {rel[u >= 0.1 * u_star].max():.3e}"
+    )
     ref = eq32(0.7, 0.1, 2.5)
     print(f"(3) working point (delta, eps, w) = (0.7, 0.1, 2.5): Eq. 32 v*/(omega R) = {ref:.6f}")
     for per_a in (50, 64, 100, 128, 200):

@@ -1,6 +1,7 @@
 """``rolling-drive accuracy``: the JSON keys, a faithful replay (zero error where the reference
 is the shipped setting), a coarsened env that errs more, and bad flags (one line, exit 2).
 Short episodes (``--episode-steps``) and small refinements keep it quick."""
+
 from __future__ import annotations
 
 import json
@@ -13,12 +14,35 @@ from rolling_env import accuracy as A
 from rolling_env.cli import main
 
 QUICK = {"episode_steps": 32}
-EPISODE_KEYS = {"kind", "label", "steps", "target", "replay_exact", "xstar_shipped",
-                "xstar_reference", "xstar_error_tol", "xstar_uncertainty_tol",
-                "slip_work_shipped", "slip_work_reference", "slip_error_pct",
-                "slip_uncertainty_pct", "steps_per_s", "levels"}
-SCENE_KEYS = {"scene", "tolerance", "episode_steps", "seed", "shipped", "levels", "order",
-              "ratio", "episodes", "seconds"}
+EPISODE_KEYS = {
+    "kind",
+    "label",
+    "steps",
+    "target",
+    "replay_exact",
+    "xstar_shipped",
+    "xstar_reference",
+    "xstar_error_tol",
+    "xstar_uncertainty_tol",
+    "slip_work_shipped",
+    "slip_work_reference",
+    "slip_error_pct",
+    "slip_uncertainty_pct",
+    "steps_per_s",
+    "levels",
+}
+SCENE_KEYS = {
+    "scene",
+    "tolerance",
+    "episode_steps",
+    "seed",
+    "shipped",
+    "levels",
+    "order",
+    "ratio",
+    "episodes",
+    "seconds",
+}
 
 
 def _numbers(o):
@@ -35,17 +59,43 @@ def _numbers(o):
 
 def test_json_has_the_documented_keys_and_finite_values(tmp_path, capsys):
     out = tmp_path / "acc.md"
-    assert main(["accuracy", "--scene", "default", "--refine", "2", "--refine-grid", "1",
-                 "--episode-steps", "32", "--episodes-random", "2", "--seed", "3", "--json",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "accuracy",
+                "--scene",
+                "default",
+                "--refine",
+                "2",
+                "--refine-grid",
+                "1",
+                "--episode-steps",
+                "32",
+                "--episodes-random",
+                "2",
+                "--seed",
+                "3",
+                "--json",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     r = json.loads(capsys.readouterr().out)
     assert SCENE_KEYS <= set(r), set(r) ^ SCENE_KEYS
     s, res = A.shipped_numerics(rolling_env.make("default"))  # as the built env resolves them
     assert r["shipped"] == {"sub_steps": s, "resolution": res}
-    assert r["levels"] == [{"sub_steps": 2 * s, "resolution": res},
-                           {"sub_steps": 4 * s, "resolution": 2 * res}]
-    assert [e["label"] for e in r["episodes"]] == ["eq32-feedback", "eq32-open-loop",
-                                                   "random 1", "random 2"]
+    assert r["levels"] == [
+        {"sub_steps": 2 * s, "resolution": res},
+        {"sub_steps": 4 * s, "resolution": 2 * res},
+    ]
+    assert [e["label"] for e in r["episodes"]] == [
+        "eq32-feedback",
+        "eq32-open-loop",
+        "random 1",
+        "random 2",
+    ]
     for e in r["episodes"]:
         assert EPISODE_KEYS <= set(e), set(e) ^ EPISODE_KEYS
         assert e["steps"] == 32 and e["replay_exact"] and len(e["levels"]) == 2
@@ -59,8 +109,9 @@ def test_json_has_the_documented_keys_and_finite_values(tmp_path, capsys):
 def test_reference_at_the_shipped_settings_gives_zero_error():
     """Both reference levels at the shipped settings: the replay of the recorded actions
     must give the recording itself, so every error and uncertainty is exactly 0."""
-    r = A.scene_accuracy("default", level_factors=((1, 1), (1, 1)), overrides=QUICK,
-                         timing_repeats=1)
+    r = A.scene_accuracy(
+        "default", level_factors=((1, 1), (1, 1)), overrides=QUICK, timing_repeats=1
+    )
     for e in r["episodes"]:
         assert e["replay_exact"], e["label"]
         assert e["xstar_error_tol"] == 0.0 and e["xstar_uncertainty_tol"] == 0.0, e
@@ -73,8 +124,10 @@ def test_coarsened_env_errs_more_than_the_shipped_one():
     ov = {"episode_steps": 64}
     rec = A.record("default", "eq32-feedback", 0, overrides=ov)
     acts = rec["actions"]
-    c, f = [A.replay("default", acts, 0, s, r, overrides=ov)
-            for s, r in A.check_levels("default", A.levels(8, 2), ov)]
+    c, f = [
+        A.replay("default", acts, 0, s, r, overrides=ov)
+        for s, r in A.check_levels("default", A.levels(8, 2), ov)
+    ]
     x_ref = A.richardson(c["xstar"], f["xstar"], 2.0)
     s_ref = A.richardson(c["slip_work"], f["slip_work"], 2.0)
     shipped = A.replay("default", acts, 0, overrides=ov)
@@ -91,24 +144,26 @@ def test_richardson_second_order():
     assert A.richardson(3.0, 3.0, 1.0) == 3.0
 
 
-@pytest.mark.parametrize("argv,name", [
-    (["--scene", "default", "--refine", "0"], "refine must be an integer in"),
-    (["--scene", "default", "--refine", "two"], "refine must be an integer"),
-    (["--scene", "default", "--refine-grid", "0"], "refine-grid must be an integer in"),
-    (["--scene", "default", "--episodes-random", "-1"], "episodes-random must be an integer"),
-    (["--scene", "default", "--seed", "-1"], "seed must be an integer in"),
-    (["--scene", "default", "--episode-steps", "0"], "episode-steps must be an integer in"),
-    (["--scene", "default", "--out", "{dir}/"], "out must be a file path"),
-    (["--scene", "default", "--all"], "--all: not allowed with argument --scene"),
-    ([], "one of the arguments --scene --all is required"),
-    # checked by building the envs, before any episode runs
-    (["--scene", "defualt"], "--scene: unknown scene 'defualt'"),
-    (["--scene", "default", "--refine", "100000"], "--refine: the reference level"),
-    (["--scene", "default", "--refine-grid", "1024"], "--refine-grid: the reference level"),
-    (["--scene", "default", "--out", "{file}/report.md"], "--out: cannot write"),
-])
-def test_bad_flags_exit_2_in_one_line_naming_the_flag(argv, name, tmp_path, capsys,
-                                                      monkeypatch):
+@pytest.mark.parametrize(
+    "argv,name",
+    [
+        (["--scene", "default", "--refine", "0"], "refine must be an integer in"),
+        (["--scene", "default", "--refine", "two"], "refine must be an integer"),
+        (["--scene", "default", "--refine-grid", "0"], "refine-grid must be an integer in"),
+        (["--scene", "default", "--episodes-random", "-1"], "episodes-random must be an integer"),
+        (["--scene", "default", "--seed", "-1"], "seed must be an integer in"),
+        (["--scene", "default", "--episode-steps", "0"], "episode-steps must be an integer in"),
+        (["--scene", "default", "--out", "{dir}/"], "out must be a file path"),
+        (["--scene", "default", "--all"], "--all: not allowed with argument --scene"),
+        ([], "one of the arguments --scene --all is required"),
+        # checked by building the envs, before any episode runs
+        (["--scene", "defualt"], "--scene: unknown scene 'defualt'"),
+        (["--scene", "default", "--refine", "100000"], "--refine: the reference level"),
+        (["--scene", "default", "--refine-grid", "1024"], "--refine-grid: the reference level"),
+        (["--scene", "default", "--out", "{file}/report.md"], "--out: cannot write"),
+    ],
+)
+def test_bad_flags_exit_2_in_one_line_naming_the_flag(argv, name, tmp_path, capsys, monkeypatch):
     f = tmp_path / "a_file"
     f.write_text("keep")
     monkeypatch.setattr(A, "run", lambda *a, **k: pytest.fail("computed before the checks"))
@@ -127,15 +182,32 @@ def test_all_writes_one_report_of_every_scene(tmp_path, capsys, monkeypatch):
     """``--all`` runs every shipped scene (here the list is cut to one: the run's cost is the
     other tests') and writes one markdown report; --json is {"scenes": [...], "seconds"}."""
     import rolling_env.scenes
+
     monkeypatch.setattr(rolling_env.scenes, "list_scenes", lambda: ["default"])
     out = tmp_path / "sub" / "env_accuracy.md"
-    assert main(["accuracy", "--all", "--refine", "1", "--refine-grid", "1",
-                 "--episode-steps", "16", "--episodes-random", "0", "--json",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "accuracy",
+                "--all",
+                "--refine",
+                "1",
+                "--refine-grid",
+                "1",
+                "--episode-steps",
+                "16",
+                "--episodes-random",
+                "0",
+                "--json",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     r = json.loads(capsys.readouterr().out)
     assert set(r) == {"scenes", "seconds"} and [s["scene"] for s in r["scenes"]] == ["default"]
-    assert [e["kind"] for e in r["scenes"][0]["episodes"]] == ["eq32-feedback",
-                                                                "eq32-open-loop"]
+    assert [e["kind"] for e in r["scenes"][0]["episodes"]] == ["eq32-feedback", "eq32-open-loop"]
     text = out.read_text()
     assert text.startswith("# Accuracy") and "## default" in text
     assert "rolling-drive accuracy --all --refine 1 --refine-grid 1" in text

@@ -1,4 +1,5 @@
 """Baselines and the training/evaluation scripts, run for real (short budgets)."""
+
 from __future__ import annotations
 
 import csv
@@ -17,9 +18,7 @@ import yaml
 import rolling_env
 from agents.baselines import Eq32Design, Eq32Feedback, Eq32OpenLoop
 from agents.common import atomic_write, load_hyperparams, parse_kwargs
-from agents.evaluate import (agent_file, episode_metrics, goal_verdicts, held_out_targets,
-                             load_agent)
-from rolling_env import analytic
+from agents.evaluate import agent_file, episode_metrics, goal_verdicts, held_out_targets, load_agent
 from rolling_env.rollout import rollout
 
 REPO = Path(__file__).resolve().parent.parent
@@ -29,8 +28,10 @@ def _final_errors(scene, cls, n):
     env = rolling_env.make(scene)
     ctrl = cls.from_env(env)
     tol = env.unwrapped.scene.tolerance
-    return [abs(rollout(env, ctrl, seed=i, target=t)["final_error"]) / tol
-            for i, t in enumerate(held_out_targets(scene, n))]
+    return [
+        abs(rollout(env, ctrl, seed=i, target=t)["final_error"]) / tol
+        for i, t in enumerate(held_out_targets(scene, n))
+    ]
 
 
 def test_open_loop_exact_in_heavy_infinite_friction_scene():
@@ -60,6 +61,7 @@ def test_baseline_on_a_vecenv_batch_matches_single_env():
     """predict on a VecEnv batch (obs (n, 13), episode_start per env) drives each env as the
     single-env rollout does."""
     from rolling_env.vector import RollingDriveVecEnv
+
     target = 2e-7
     venv = RollingDriveVecEnv(2, scene="default")
     venv.set_options({"target": target})
@@ -73,7 +75,9 @@ def test_baseline_on_a_vecenv_batch_matches_single_env():
     env = rolling_env.make("default")
     single = rollout(env, Eq32Feedback.from_env(env), seed=0, target=target, max_steps=511)
     assert np.allclose(err_batch, single["final_error"], rtol=1e-5, atol=1e-13), (
-        err_batch, single["final_error"])
+        err_batch,
+        single["final_error"],
+    )
 
 
 def test_design_inverts_eq32_and_stays_wearless():
@@ -85,7 +89,7 @@ def test_design_inverts_eq32_and_stays_wearless():
         assert creep <= d.creep_cap * (1 + 1e-12), "creep must stay in the wearless window"
     # the wearless window of physics.md: creep * w * a1 < mu (E*/G*) a1^2 / R
     sc = env.unwrapped.scene
-    assert d.creep_cap * d.w * d.a1 < sc.mu * sc.E_star / sc.G_star * d.a1 ** 2 / sc.R
+    assert d.creep_cap * d.w * d.a1 < sc.mu * sc.E_star / sc.G_star * d.a1**2 / sc.R
     r = rollout(env, Eq32OpenLoop.from_env(env), seed=0, target=2e-7)
     # mostly stuck: far less friction work than sliding the runner's whole travel at mu N_max.
     # Not none: with finite friction the material leaving the contact slides to zero
@@ -135,6 +139,7 @@ def test_atomic_write_never_leaves_partial_file(tmp_path):
     def broken(p):
         Path(p).write_text("half")
         raise RuntimeError("killed mid-write")
+
     with pytest.raises(RuntimeError):
         atomic_write(target, broken)
     assert target.read_text() == "old" and list(tmp_path.iterdir()) == [target]
@@ -159,6 +164,7 @@ def test_atomic_write_gives_the_mode_of_a_plain_open(tmp_path):
 def test_atomic_write_applies_the_umask(tmp_path, monkeypatch):
     """A new file gets 0666 less the process umask (read once at import), whatever it is."""
     import rolling_env.io as rio
+
     for mask in (0o022, 0o027, 0o077):
         monkeypatch.setattr(rio, "_UMASK", mask)
         f = tmp_path / f"new{mask:o}.txt"
@@ -167,10 +173,29 @@ def test_atomic_write_applies_the_umask(tmp_path, monkeypatch):
 
 
 def _train(tmp_path, *extra, timesteps=512, scene="default", n_envs=2):
-    cmd = [sys.executable, "-m", "agents.train", "--algo", "ppo", "--scene", scene,
-           "--seed", "3", "--n-timesteps", str(timesteps), "--n-envs", str(n_envs),
-           "--eval-freq", "512", "--eval-episodes", "1", "--no-progress",
-           "--run-dir", str(tmp_path / "run"), *extra]
+    cmd = [
+        sys.executable,
+        "-m",
+        "agents.train",
+        "--algo",
+        "ppo",
+        "--scene",
+        scene,
+        "--seed",
+        "3",
+        "--n-timesteps",
+        str(timesteps),
+        "--n-envs",
+        str(n_envs),
+        "--eval-freq",
+        "512",
+        "--eval-episodes",
+        "1",
+        "--no-progress",
+        "--run-dir",
+        str(tmp_path / "run"),
+        *extra,
+    ]
     return cmd
 
 
@@ -178,13 +203,22 @@ def test_short_training_run_saves_loadable_model(tmp_path):
     out = subprocess.run(_train(tmp_path), cwd=REPO, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     run = tmp_path / "run"
-    for f in ("model.zip", "model_vecnormalize.pkl", "config.yml", "command.txt", "meta.json",
-              "evaluations.npz", "best_model.zip", "best_model_vecnormalize.pkl"):
+    for f in (
+        "model.zip",
+        "model_vecnormalize.pkl",
+        "config.yml",
+        "command.txt",
+        "meta.json",
+        "evaluations.npz",
+        "best_model.zip",
+        "best_model_vecnormalize.pkl",
+    ):
         assert (run / f).exists(), f"missing {f}"
     meta = json.loads((run / "meta.json").read_text())
     assert meta["env_steps"] >= 512 and meta["seed"] == 3 and not meta["interrupted"]
-    head = subprocess.run(["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True,
-                          text=True)
+    head = subprocess.run(
+        ["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True, text=True
+    )
     if head.returncode == 0:  # a git checkout: the run records the code that trained it
         assert meta["commit"].split("-")[0] == head.stdout.strip(), meta["commit"]
     assert set(meta["threads"]) == {"NUMBA_NUM_THREADS", "OMP_NUM_THREADS"}, meta
@@ -218,11 +252,23 @@ def test_train_refuses_a_used_run_folder(tmp_path, capsys):
 
     from agents.train import RUN_MARKER
     from agents.train import main as train_main
+
     run = tmp_path / "run"
     run.mkdir()
     inode = run.stat().st_ino
-    argv = ["--algo", "ppo", "--n-timesteps", "64", "--n-envs", "1", "--eval-freq", "64",
-            "--eval-episodes", "1", "--no-progress"]
+    argv = [
+        "--algo",
+        "ppo",
+        "--n-timesteps",
+        "64",
+        "--n-envs",
+        "1",
+        "--eval-freq",
+        "64",
+        "--eval-episodes",
+        "1",
+        "--no-progress",
+    ]
     assert train_main(argv + ["--run-dir", str(run), "--overwrite"]) == 0
     assert run.stat().st_ino == inode, "an empty folder must be used, not deleted and remade"
     assert (run / RUN_MARKER).is_file() and (run / "model.zip").exists()
@@ -231,9 +277,11 @@ def test_train_refuses_a_used_run_folder(tmp_path, capsys):
     good = tmp_path / "good"
     shutil.copytree(run, good)
     assert train_main(argv + ["--run-dir", str(run), "--overwrite"]) == 0  # its own files only
-    for extra, reason in ((".env", "holds files a run does not write (.env)"),
-                          ("notes.txt", "holds files a run does not write (notes.txt)"),
-                          ("tb/mydata/paper.tex", "tb/mydata")):
+    for extra, reason in (
+        (".env", "holds files a run does not write (.env)"),
+        ("notes.txt", "holds files a run does not write (notes.txt)"),
+        ("tb/mydata/paper.tex", "tb/mydata"),
+    ):
         victim = tmp_path / "victim"
         shutil.copytree(good, victim)
         (victim / extra).parent.mkdir(parents=True, exist_ok=True)
@@ -262,27 +310,41 @@ def test_train_refuses_a_used_run_folder(tmp_path, capsys):
 
 def test_time_to_goal_is_the_first_evaluation_that_meets_the_goal():
     from agents.evaluate import time_to_goal
+
     base = {"final_abs_error_mean": 1.0e-8, "slip_work_mean": 2.0e-8}
-    log = [{"env_steps": 10, "wall_seconds": 1.0, "final_abs_error": [4e-9, 8e-9],
-            "slip_work": [1e-8, 1e-8]},                   # error 0.6x: not yet
-           {"env_steps": 20, "wall_seconds": 2.0, "final_abs_error": [4e-9, 5e-9],
-            "slip_work": [3e-8, 2e-8]},                   # error 0.45x, but 1.25x the wear
-           {"env_steps": 30, "wall_seconds": 3.5, "final_abs_error": [4e-9, 6e-9],
-            "slip_work": [2e-8, 2e-8]},                   # 0.5x at 1x: met
-           {"env_steps": 40, "wall_seconds": 4.0, "final_abs_error": [1e-9],
-            "slip_work": [1e-8]}]
+    log = [
+        {
+            "env_steps": 10,
+            "wall_seconds": 1.0,
+            "final_abs_error": [4e-9, 8e-9],
+            "slip_work": [1e-8, 1e-8],
+        },  # error 0.6x: not yet
+        {
+            "env_steps": 20,
+            "wall_seconds": 2.0,
+            "final_abs_error": [4e-9, 5e-9],
+            "slip_work": [3e-8, 2e-8],
+        },  # error 0.45x, but 1.25x the wear
+        {
+            "env_steps": 30,
+            "wall_seconds": 3.5,
+            "final_abs_error": [4e-9, 6e-9],
+            "slip_work": [2e-8, 2e-8],
+        },  # 0.5x at 1x: met
+        {"env_steps": 40, "wall_seconds": 4.0, "final_abs_error": [1e-9], "slip_work": [1e-8]},
+    ]
     assert time_to_goal(log, base) == (30, 3.5)
     assert time_to_goal(log[:2], base) == "never"
     assert time_to_goal(None, base) is None
 
 
 def test_goal_verdicts():
-    rows = [dict(scene="s", controller="eq32-open-loop", final_abs_error_mean=4.0,
-                 slip_work_mean=1.0),
-            dict(scene="s", controller="eq32-feedback", final_abs_error_mean=2.0,
-                 slip_work_mean=3.0),
-            dict(scene="s", controller="ppo_seed0", final_abs_error_mean=0.9, slip_work_mean=3.0),
-            dict(scene="s", controller="sac_seed0", final_abs_error_mean=0.9, slip_work_mean=3.1)]
+    rows = [
+        dict(scene="s", controller="eq32-open-loop", final_abs_error_mean=4.0, slip_work_mean=1.0),
+        dict(scene="s", controller="eq32-feedback", final_abs_error_mean=2.0, slip_work_mean=3.0),
+        dict(scene="s", controller="ppo_seed0", final_abs_error_mean=0.9, slip_work_mean=3.0),
+        dict(scene="s", controller="sac_seed0", final_abs_error_mean=0.9, slip_work_mean=3.1),
+    ]
     v = {r["agent"]: r for r in goal_verdicts(rows)}
     assert v["ppo_seed0"]["baseline"] == "eq32-feedback" and v["ppo_seed0"]["met"]
     assert not v["sac_seed0"]["met"], "more slip work than the baseline is not the goal"
@@ -295,11 +357,23 @@ def test_seed_summary_sums_up_runs_that_differ_only_in_their_seed():
     from agents.evaluate import seed_summary
 
     def row(c, err, slip):
-        return dict(scene="s", controller=c, final_abs_error_mean=err * 1e-8,
-                    slip_work_mean=slip, tolerance=1e-8)
-    rows = [row("eq32-open-loop", 4.0, 1.0), row("eq32-feedback", 2.0, 3.0),
-            row("ppo_seed0", 0.5, 2.0), row("ppo_seed1", 0.9, 3.0), row("ppo_seed2", 1.0, 4.0),
-            row("sac_seed0", 0.1, 0.0), row("myrun", 0.1, 0.0)]
+        return dict(
+            scene="s",
+            controller=c,
+            final_abs_error_mean=err * 1e-8,
+            slip_work_mean=slip,
+            tolerance=1e-8,
+        )
+
+    rows = [
+        row("eq32-open-loop", 4.0, 1.0),
+        row("eq32-feedback", 2.0, 3.0),
+        row("ppo_seed0", 0.5, 2.0),
+        row("ppo_seed1", 0.9, 3.0),
+        row("ppo_seed2", 1.0, 4.0),
+        row("sac_seed0", 0.1, 0.0),
+        row("myrun", 0.1, 0.0),
+    ]
     (g,) = seed_summary(rows)
     assert (g["agent"], g["seeds"], g["seed_list"]) == ("ppo", 3, [0, 1, 2]), g
     assert g["error_mean"] == pytest.approx(0.8, rel=1e-12), g
@@ -309,16 +383,20 @@ def test_seed_summary_sums_up_runs_that_differ_only_in_their_seed():
     # two runs naming one seed (ppo_seed1, ppo_seed01) are not two seeds
     assert seed_summary(rows + [row("ppo_seed01", 0.7, 2.0)]) == []
     # an interrupted run (its checkpoint, fewer steps) or another configuration is not a seed
-    for key, value in (("model_file", "checkpoint.zip"), ("train_env_steps", 20_000),
-                       ("config_key", '{"n_timesteps": 1000}')):
+    for key, value in (
+        ("model_file", "checkpoint.zip"),
+        ("train_env_steps", 20_000),
+        ("config_key", '{"n_timesteps": 1000}'),
+    ):
         other = [dict(r, **{key: value}) if r["controller"] == "ppo_seed1" else r for r in rows]
         assert seed_summary(other) == [], f"runs with another {key} were summed up over seeds"
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_interrupted_training_leaves_loadable_checkpoint(tmp_path, sig):
-    proc = subprocess.Popen(_train(tmp_path, timesteps=10 ** 7), cwd=REPO,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        _train(tmp_path, timesteps=10**7), cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
     run = tmp_path / "run"
     deadline = time.time() + 120
     while not (run / "evaluations.npz").exists() and time.time() < deadline:
@@ -342,29 +420,45 @@ def test_ppo_learns_to_move_the_runner(tmp_path):
     heavy infinite-friction scene at least halve the final error of standing still (|target|)
     on the median held-out target.  The shipped 1M-step run's learning curve leaves its plateau
     of about -300 at 200-300k steps."""
-    out = subprocess.run(_train(tmp_path, "--eval-freq", "50000", timesteps=400_000,
-                                scene="heavy_inf_friction", n_envs=8),
-                         cwd=REPO, capture_output=True, text=True, timeout=3000)
+    out = subprocess.run(
+        _train(
+            tmp_path,
+            "--eval-freq",
+            "50000",
+            timesteps=400_000,
+            scene="heavy_inf_friction",
+            n_envs=8,
+        ),
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=3000,
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     env = rolling_env.make("heavy_inf_friction")
     agent = load_agent(tmp_path / "run" / "model.zip", env)
     targets = held_out_targets("heavy_inf_friction", 5)
-    rel = [abs(rollout(env, agent, seed=i, target=t)["final_error"] / t)
-           for i, t in enumerate(targets)]
+    rel = [
+        abs(rollout(env, agent, seed=i, target=t)["final_error"] / t) for i, t in enumerate(targets)
+    ]
     # the median: one short run may still send a single target astray (seen: 1 of 5)
     assert np.median(rel) < 0.5, f"PPO final |error| / |target|: {np.round(rel, 3)}"
 
 
-@pytest.mark.parametrize("extra,name", [
-    (["--n-timesteps", "0"], "n-timesteps"),
-    (["--n-timesteps", "-5"], "n-timesteps"),
-    (["--n-envs", "0"], "n-envs"),
-    (["--eval-freq", "-1"], "eval-freq"),
-    (["--seed", "-3"], "seed"),
-])
+@pytest.mark.parametrize(
+    "extra,name",
+    [
+        (["--n-timesteps", "0"], "n-timesteps"),
+        (["--n-timesteps", "-5"], "n-timesteps"),
+        (["--n-envs", "0"], "n-envs"),
+        (["--eval-freq", "-1"], "eval-freq"),
+        (["--seed", "-3"], "seed"),
+    ],
+)
 def test_train_rejects_bad_arguments(extra, name, tmp_path, capsys):
     """No silent fallback to the YAML budget, no clamping: exit 2 naming the argument."""
     from agents.train import main as train_main
+
     with pytest.raises(SystemExit) as e:
         train_main(["--algo", "ppo", "--run-dir", str(tmp_path / "run"), *extra])
     assert e.value.code == 2
@@ -374,8 +468,10 @@ def test_train_rejects_bad_arguments(extra, name, tmp_path, capsys):
 
 def test_train_bad_scene_leaves_no_run_folder(tmp_path, capsys):
     from agents.train import main as train_main
-    assert train_main(["--algo", "ppo", "--scene", "bogus", "--run-dir",
-                       str(tmp_path / "run")]) == 2
+
+    assert (
+        train_main(["--algo", "ppo", "--scene", "bogus", "--run-dir", str(tmp_path / "run")]) == 2
+    )
     err = capsys.readouterr().err
     assert "--scene: unknown scene 'bogus'" in err, err
     assert not (tmp_path / "run").exists(), "config.yml written before the scene was checked"
@@ -385,6 +481,7 @@ def test_rollout_takes_the_open_loop_baseline_by_its_table_name():
     """``eq32-open-loop`` (the name in agents.evaluate's tables) is the same controller as
     ``eq32``: the same class and an identical 40-step rollout."""
     from rolling_env.rollout import make_controller
+
     data = {}
     for name in ("eq32", "eq32-open-loop"):
         env = rolling_env.make("default")
@@ -398,33 +495,68 @@ def test_rollout_takes_the_open_loop_baseline_by_its_table_name():
 
 
 @pytest.mark.filterwarnings("ignore:You have specified a mini-batch size")
-@pytest.mark.parametrize("field, value", [("batch_size", 0), ("learning_rate", "abc"),
-                                          ("policy_kwargs", "dict(net_arch=[64"),
-                                          ("n_steps", 2.5), ("normalize", "dict(foo=1)")])
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("batch_size", 0),
+        ("learning_rate", "abc"),
+        ("policy_kwargs", "dict(net_arch=[64"),
+        ("n_steps", 2.5),
+        ("normalize", "dict(foo=1)"),
+    ],
+)
 def test_train_bad_hyperparameters_are_usage_errors(field, value, tmp_path, capsys):
     """Hyper-parameters that SB3 rejects (by assert, TypeError or a syntax error in a kwargs
     string) are one line and exit 2 with no run folder, like a bad scene."""
     from agents.train import main as train_main
+
     conf = yaml.safe_load((REPO / "configs/hyperparams/ppo.yml").read_text())
     conf["default"][field] = value
     path = tmp_path / "ppo.yml"
     path.write_text(yaml.safe_dump(conf))
-    assert train_main(["--algo", "ppo", "--conf", str(path), "--run-dir", str(tmp_path / "run"),
-                       "--n-timesteps", "64", "--no-progress"]) == 2
+    assert (
+        train_main(
+            [
+                "--algo",
+                "ppo",
+                "--conf",
+                str(path),
+                "--run-dir",
+                str(tmp_path / "run"),
+                "--n-timesteps",
+                "64",
+                "--no-progress",
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
     assert err.startswith("python -m agents.train: error:") and err.count("\n") == 1, err
     assert not (tmp_path / "run").exists()
-    assert train_main(["--algo", "ppo", "--conf", str(tmp_path / "missing.yml"),
-                       "--run-dir", str(tmp_path / "run")]) == 2
+    assert (
+        train_main(
+            [
+                "--algo",
+                "ppo",
+                "--conf",
+                str(tmp_path / "missing.yml"),
+                "--run-dir",
+                str(tmp_path / "run"),
+            ]
+        )
+        == 2
+    )
     assert "missing.yml" in capsys.readouterr().err
     del conf["default"]["n_timesteps"]
     path.write_text(yaml.safe_dump({"default": conf["default"]}))
-    assert train_main(["--algo", "ppo", "--conf", str(path),
-                       "--run-dir", str(tmp_path / "run")]) == 2
+    assert (
+        train_main(["--algo", "ppo", "--conf", str(path), "--run-dir", str(tmp_path / "run")]) == 2
+    )
     assert "'n_timesteps' missing" in capsys.readouterr().err
     path.write_text(yaml.safe_dump({"other": conf["default"]}))
-    assert train_main(["--algo", "ppo", "--conf", str(path),
-                       "--run-dir", str(tmp_path / "run")]) == 2
+    assert (
+        train_main(["--algo", "ppo", "--conf", str(path), "--run-dir", str(tmp_path / "run")]) == 2
+    )
     assert "needs an entry for scene 'default'" in capsys.readouterr().err
 
 
@@ -437,23 +569,46 @@ def test_train_lets_an_error_while_learning_propagate(tmp_path, monkeypatch):
 
     def boom(self, *a, **k):
         raise ValueError("raised inside learn")
+
     monkeypatch.setattr(sb3.PPO, "learn", boom)
     with pytest.raises(ValueError, match="raised inside learn"):
-        train_main(["--algo", "ppo", "--run-dir", str(tmp_path / "run"), "--n-timesteps", "64",
-                    "--no-progress"])
+        train_main(
+            [
+                "--algo",
+                "ppo",
+                "--run-dir",
+                str(tmp_path / "run"),
+                "--n-timesteps",
+                "64",
+                "--no-progress",
+            ]
+        )
 
 
 def test_evaluate_checks_every_scene_before_writing(tmp_path, capsys):
     from agents.evaluate import main as evaluate_main
+
     with pytest.raises(SystemExit) as e:
-        evaluate_main(["--scenes", "heavy_inf_friction", "bogus", "--runs", str(tmp_path),
-                       "--episodes", "1", "--out", str(tmp_path / "out")])
+        evaluate_main(
+            [
+                "--scenes",
+                "heavy_inf_friction",
+                "bogus",
+                "--runs",
+                str(tmp_path),
+                "--episodes",
+                "1",
+                "--out",
+                str(tmp_path / "out"),
+            ]
+        )
     assert e.value.code == 2 and "bogus" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
 
 
 def test_train_scene_key_accepts_both_yaml_suffixes():
     from agents.train import scene_key
+
     assert scene_key("configs/scenes/resonant.yml") == scene_key("x/resonant.yaml") == "resonant"
     assert scene_key("default") == "default"
 
@@ -477,7 +632,8 @@ def test_baseline_restarts_on_a_reset_observation_without_episode_start(cls):
     for ep in (0, 1):
         assert finals["reused", ep] == pytest.approx(finals["fresh", ep], abs=1e-3 * tol), (
             f"episode {ep}: reused controller ends {finals['reused', ep] / tol:.2f} tol off, "
-            f"fresh one {finals['fresh', ep] / tol:.2f}")
+            f"fresh one {finals['fresh', ep] / tol:.2f}"
+        )
 
 
 def test_baseline_rejects_a_scene_too_slow_for_eq32():
@@ -488,8 +644,12 @@ def test_baseline_rejects_a_scene_too_slow_for_eq32():
         Eq32Feedback.from_env(env)
     with pytest.raises(ValueError, match="stroke_roll"):
         Eq32OpenLoop.from_env(rolling_env.make("default", stroke_roll=1e-5))
-    for kw, name in ((dict(w_pref=1.9), "w_pref"), (dict(slip_margin=0.0), "slip_margin"),
-                     (dict(delta_pref=1.5), "delta_pref"), (dict(delta_pref=1.0), "delta_pref")):
+    for kw, name in (
+        (dict(w_pref=1.9), "w_pref"),
+        (dict(slip_margin=0.0), "slip_margin"),
+        (dict(delta_pref=1.5), "delta_pref"),
+        (dict(delta_pref=1.0), "delta_pref"),
+    ):
         with pytest.raises(ValueError, match=name):
             Eq32Feedback.from_env(rolling_env.make("default"), **kw)
 
@@ -498,12 +658,24 @@ def test_evaluate_rejects_a_scene_the_baselines_cannot_drive(tmp_path, capsys):
     """A valid scene file that Eq. 32 cannot drive (w < 2) is refused before anything is
     written, not after the other scenes were evaluated."""
     from agents.evaluate import main as evaluate_main
+
     slow = tmp_path / "slow.yaml"
     data = yaml.safe_load((rolling_env.scenes.SCENE_DIR / "default.yaml").read_text())
     slow.write_text(yaml.safe_dump({**data, "omega_R_max": 0.1}))
     with pytest.raises(SystemExit) as e:
-        evaluate_main(["--scenes", "heavy_inf_friction", str(slow), "--runs", str(tmp_path),
-                       "--episodes", "1", "--out", str(tmp_path / "out")])
+        evaluate_main(
+            [
+                "--scenes",
+                "heavy_inf_friction",
+                str(slow),
+                "--runs",
+                str(tmp_path),
+                "--episodes",
+                "1",
+                "--out",
+                str(tmp_path / "out"),
+            ]
+        )
     assert e.value.code == 2 and "omega_R_max" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
 
@@ -512,14 +684,34 @@ def test_evaluate_rejects_a_scene_the_baselines_cannot_drive(tmp_path, capsys):
 def trained_run(tmp_path_factory):
     """One tiny PPO run on a scene *file* (copy of heavy_inf_friction named 'myscene')."""
     from agents.train import main as train_main
+
     base = tmp_path_factory.mktemp("evalruns")
     scene = base / "scenes" / "myscene.yaml"
     scene.parent.mkdir()
     scene.write_text((rolling_env.scenes.SCENE_DIR / "heavy_inf_friction.yaml").read_text())
     runs = base / "runs"
-    assert train_main(["--algo", "ppo", "--scene", str(scene), "--n-timesteps", "64",
-                       "--n-envs", "1", "--eval-freq", "64", "--eval-episodes", "1",
-                       "--no-progress", "--run-dir", str(runs / "myscene" / "ppo_seed0")]) == 0
+    assert (
+        train_main(
+            [
+                "--algo",
+                "ppo",
+                "--scene",
+                str(scene),
+                "--n-timesteps",
+                "64",
+                "--n-envs",
+                "1",
+                "--eval-freq",
+                "64",
+                "--eval-episodes",
+                "1",
+                "--no-progress",
+                "--run-dir",
+                str(runs / "myscene" / "ppo_seed0"),
+            ]
+        )
+        == 0
+    )
     return scene, runs
 
 
@@ -527,10 +719,15 @@ def test_evaluate_finds_the_runs_of_a_scene_file(trained_run, tmp_path):
     """A scene given as a file: its runs live under <runs>/<stem>/ (where train puts them) and
     its plot goes to <out>/plots/<stem>.png, not beside the scene file."""
     from agents.evaluate import main as evaluate_main
+
     scene, runs = trained_run
     out = tmp_path / "out"
-    assert evaluate_main(["--scenes", str(scene), "--runs", str(runs), "--episodes", "1",
-                          "--out", str(out)]) == 0
+    assert (
+        evaluate_main(
+            ["--scenes", str(scene), "--runs", str(runs), "--episodes", "1", "--out", str(out)]
+        )
+        == 0
+    )
     text = (out / "comparison.csv").read_text()
     assert "ppo_seed0" in text, f"the trained agent was not evaluated:\n{text}"
     assert (out / "plots" / "myscene.png").exists()
@@ -545,15 +742,20 @@ def test_evaluate_model_choice_and_seed_summary(trained_run, tmp_path, capsys):
     silently; run folders are listed in the order of their numbers (seed 2 before 10)."""
     import shutil
 
-    from agents.evaluate import main as evaluate_main, scene_runs
+    from agents.evaluate import main as evaluate_main
+    from agents.evaluate import scene_runs
+
     scene, runs = trained_run
     mine = tmp_path / "runs"
     shutil.copytree(runs, mine)
     shutil.copytree(mine / "myscene" / "ppo_seed0", mine / "myscene" / "ppo_seed1")
     (mine / "myscene" / "ppo_seed10").mkdir()
     shutil.copy(mine / "myscene" / "ppo_seed0" / "config.yml", mine / "myscene" / "ppo_seed10")
-    assert [p.name for p in scene_runs(str(scene), mine)] == ["ppo_seed0", "ppo_seed1",
-                                                              "ppo_seed10"]
+    assert [p.name for p in scene_runs(str(scene), mine)] == [
+        "ppo_seed0",
+        "ppo_seed1",
+        "ppo_seed10",
+    ]
     for model, name in (("final", "model.zip"), ("best", "best_model.zip")):
         out = tmp_path / model
         argv = ["--scenes", str(scene), "--runs", str(mine), "--episodes", "2", "--out", str(out)]
@@ -566,26 +768,37 @@ def test_evaluate_model_choice_and_seed_summary(trained_run, tmp_path, capsys):
         md = (out / "comparison.md").read_text()
         assert f"| myscene | ppo_seed1 | {name} |" in md, md
         (line,) = [ln for ln in md.splitlines() if ln.startswith("| myscene | ppo | 0, 1 |")]
-        e0 = (float(rows["ppo_seed0"]["final_abs_error_mean"])
-              / float(rows["ppo_seed0"]["tolerance"]))
+        e0 = float(rows["ppo_seed0"]["final_abs_error_mean"]) / float(
+            rows["ppo_seed0"]["tolerance"]
+        )
         assert f"| {e0:.2f} ({e0:.2f}-{e0:.2f}) |" in line, f"mean and range of one value: {line}"
 
 
-@pytest.mark.parametrize("edit,match", [
-    (lambda c: c.update(env_kwargs={"scene": "x", "mu": 0.02}), r"scene overrides \{'mu': 0.02\}"),
-    (lambda c: c.update(scene="resonant", scene_key="resonant"),
-     "was trained on scene 'resonant'"),
-    (lambda c: (c.update(scene="resonant"), c.pop("scene_key")),  # a run from before the key
-     "was trained on scene 'resonant'"),
-])
-def test_evaluate_refuses_runs_not_trained_on_the_scene(trained_run, tmp_path, capsys, edit,
-                                                        match):
+@pytest.mark.parametrize(
+    "edit,match",
+    [
+        (
+            lambda c: c.update(env_kwargs={"scene": "x", "mu": 0.02}),
+            r"scene overrides \{'mu': 0.02\}",
+        ),
+        (
+            lambda c: c.update(scene="resonant", scene_key="resonant"),
+            "was trained on scene 'resonant'",
+        ),
+        (
+            lambda c: (c.update(scene="resonant"), c.pop("scene_key")),  # a run from before the key
+            "was trained on scene 'resonant'",
+        ),
+    ],
+)
+def test_evaluate_refuses_runs_not_trained_on_the_scene(trained_run, tmp_path, capsys, edit, match):
     """A run trained with scene overrides, or on another scene, is refused (naming it) before
     any episode runs or any file is written; it was reported as if trained on the plain
     scene."""
     import shutil
 
     from agents.evaluate import main as evaluate_main
+
     scene, runs = trained_run
     mine = tmp_path / "runs" / "myscene"
     shutil.copytree(runs / "myscene", mine)
@@ -595,8 +808,18 @@ def test_evaluate_refuses_runs_not_trained_on_the_scene(trained_run, tmp_path, c
     cfg_path.write_text(yaml.safe_dump(cfg))
     out = tmp_path / "out"
     with pytest.raises(SystemExit) as e:
-        evaluate_main(["--scenes", str(scene), "--runs", str(tmp_path / "runs"),
-                       "--episodes", "1", "--out", str(out)])
+        evaluate_main(
+            [
+                "--scenes",
+                str(scene),
+                "--runs",
+                str(tmp_path / "runs"),
+                "--episodes",
+                "1",
+                "--out",
+                str(out),
+            ]
+        )
     assert e.value.code == 2
     assert len(__import__("re").findall(match, capsys.readouterr().err)) == 1
     assert not [p for p in out.rglob("*") if p.is_file()], "files written before the check"
@@ -612,6 +835,7 @@ def test_mismatched_model_and_statistics_are_refused(trained_run, tmp_path, caps
 
     from agents.common import SAVED_AT
     from agents.evaluate import controllers_for
+
     scene, runs = trained_run
     run = tmp_path / "runs" / "myscene" / "ppo_seed0"
     shutil.copytree(runs / "myscene" / "ppo_seed0", run)
@@ -642,8 +866,9 @@ def _scene_file(path, base="default", **changes):
     return path
 
 
-def test_custom_scene_file_named_like_a_shipped_one_is_not_taken_for_it(tmp_path, monkeypatch,
-                                                                       capsys):
+def test_custom_scene_file_named_like_a_shipped_one_is_not_taken_for_it(
+    tmp_path, monkeypatch, capsys
+):
     """A scene file named default.yaml with other content (mu 0.01, runner_mass 1e-4) was
     trained into runs/default/, recorded as env_kwargs {scene: default} and evaluated as a
     `default` agent: it gets its own key default-<digest8>, its config records the scene's
@@ -654,25 +879,53 @@ def test_custom_scene_file_named_like_a_shipped_one_is_not_taken_for_it(tmp_path
     from agents.common import scene_digest, scene_key
     from agents.evaluate import main as evaluate_main
     from agents.train import main as train_main
+
     custom = _scene_file(tmp_path / "mine" / "default.yaml", mu=0.01, runner_mass=1e-4)
     key = scene_key(str(custom))
     assert key == f"default-{scene_digest(custom)[:8]}", key
     assert scene_key(str(rolling_env.scenes.SCENE_DIR / "default.yaml")) == "default", (
-        "the shipped file itself keeps its name")
+        "the shipped file itself keeps its name"
+    )
     monkeypatch.chdir(tmp_path)
-    assert train_main(["--algo", "ppo", "--scene", str(custom), "--n-timesteps", "64",
-                       "--n-envs", "1", "--eval-freq", "64", "--eval-episodes", "1",
-                       "--no-progress"]) == 0
+    assert (
+        train_main(
+            [
+                "--algo",
+                "ppo",
+                "--scene",
+                str(custom),
+                "--n-timesteps",
+                "64",
+                "--n-envs",
+                "1",
+                "--eval-freq",
+                "64",
+                "--eval-episodes",
+                "1",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     assert not (tmp_path / "runs" / "default").exists(), "landed in runs/default/ silently"
     run = tmp_path / "runs" / key / "ppo_seed0"
     cfg = yaml.safe_load((run / "config.yml").read_text())
     assert cfg["scene_key"] == key and cfg["scene_digest"] == scene_digest(custom), cfg
     assert cfg["scene_fields"]["mu"] == 0.01 and cfg["scene_fields"]["runner_mass"] == 1e-4
     assert cfg["env_kwargs"] == {"scene": str(custom)}, (
-        f"config.yml must name the scene file trained on, got {cfg['env_kwargs']}")
+        f"config.yml must name the scene file trained on, got {cfg['env_kwargs']}"
+    )
     shutil.copytree(run, tmp_path / "runs" / "default" / "ppo_seed0")  # moved by hand
-    argv = ["--scenes", "default", "--runs", str(tmp_path / "runs"), "--episodes", "1",
-            "--out", str(tmp_path / "out")]
+    argv = [
+        "--scenes",
+        "default",
+        "--runs",
+        str(tmp_path / "runs"),
+        "--episodes",
+        "1",
+        "--out",
+        str(tmp_path / "out"),
+    ]
     with pytest.raises(SystemExit) as e:
         evaluate_main(argv)
     err = capsys.readouterr().err
@@ -692,13 +945,25 @@ def test_evaluate_refuses_a_run_whose_scene_file_changed(trained_run, tmp_path, 
     import shutil
 
     from agents.evaluate import main as evaluate_main
+
     scene, runs = trained_run
     shutil.copytree(runs, tmp_path / "runs")
-    edited = _scene_file(tmp_path / "scenes" / "myscene.yaml", base="heavy_inf_friction",
-                         runner_mass=0.01)
+    edited = _scene_file(
+        tmp_path / "scenes" / "myscene.yaml", base="heavy_inf_friction", runner_mass=0.01
+    )
     with pytest.raises(SystemExit) as e:
-        evaluate_main(["--scenes", str(edited), "--runs", str(tmp_path / "runs"),
-                       "--episodes", "1", "--out", str(tmp_path / "out")])
+        evaluate_main(
+            [
+                "--scenes",
+                str(edited),
+                "--runs",
+                str(tmp_path / "runs"),
+                "--episodes",
+                "1",
+                "--out",
+                str(tmp_path / "out"),
+            ]
+        )
     err = capsys.readouterr().err
     assert e.value.code == 2 and "content differs" in err and "runner_mass" in err, err
 
@@ -708,6 +973,7 @@ def _as_if_trained_on(run, **changes):
     ``changes`` to its recorded fields (a key given as None left out, as a run recorded
     before the key existed): fields and their digest."""
     from agents.common import fields_digest
+
     cfg_path = run / "config.yml"
     cfg = yaml.safe_load(cfg_path.read_text())
     fields = dict(cfg["scene_fields"])
@@ -728,6 +994,7 @@ def test_numerics_of_a_recorded_scene_are_completed_and_described():
     differs in the numerics, the resolved sub-steps too; the shipped scenes record the
     sub-steps they resolve to."""
     from agents.common import completed_fields, numerics_note, scene_fields
+
     now = scene_fields("heavy_inf_friction")
     n = rolling_env.scenes.load_scene("heavy_inf_friction").n_sub
     assert now["sub_steps"] == "auto" and now["n_sub"] == n and now["accuracy"] == 0.01, now
@@ -736,15 +1003,18 @@ def test_numerics_of_a_recorded_scene_are_completed_and_described():
     old = {k: v for k, v in now.items() if k not in ("accuracy", "n_sub")}
     before_levels = {k: v for k, v in old.items() if k != "grid_levels"}
     assert completed_fields(dict(before_levels, sub_steps="auto"))["grid_levels"] == 0
-    assert numerics_note(completed_fields(dict(before_levels, sub_steps="auto", n_sub=n)),
-                         now) == "grid_levels 0 (now 4)"
+    assert (
+        numerics_note(completed_fields(dict(before_levels, sub_steps="auto", n_sub=n)), now)
+        == "grid_levels 0 (now 4)"
+    )
     assert completed_fields(dict(old, sub_steps="auto"))["accuracy"] == 0.01
     assert numerics_note(completed_fields(dict(old, sub_steps=8)), now) == (
-        f"sub_steps 8 (now auto: {n})")
+        f"sub_steps 8 (now auto: {n})"
+    )
     assert numerics_note(completed_fields(dict(now)), now) == ""
-    assert numerics_note(completed_fields(dict(old, sub_steps=n + 1, resolution=32.0,
-                                               accuracy=0.05)), now) == (
-        f"sub_steps {n + 1} (now auto: {n}), resolution 32 (now 64), accuracy 0.05 (now 0.01)")
+    assert numerics_note(
+        completed_fields(dict(old, sub_steps=n + 1, resolution=32.0, accuracy=0.05)), now
+    ) == (f"sub_steps {n + 1} (now auto: {n}), resolution 32 (now 64), accuracy 0.05 (now 0.01)")
 
 
 def test_a_run_trained_on_other_numerics_is_evaluated_and_marked(trained_run, tmp_path, capsys):
@@ -757,17 +1027,36 @@ def test_a_run_trained_on_other_numerics_is_evaluated_and_marked(trained_run, tm
 
     from agents.evaluate import main as evaluate_main
     from rolling_env.cli import main as cli_main
+
     scene, runs = trained_run
     shutil.copytree(runs / "myscene" / "ppo_seed0", tmp_path / "runs" / "myscene" / "ppo_seed0")
     shutil.copytree(runs / "myscene" / "ppo_seed0", tmp_path / "runs" / "myscene" / "ppo_seed1")
     for seed in (0, 1):
-        _as_if_trained_on(tmp_path / "runs" / "myscene" / f"ppo_seed{seed}", sub_steps=4,
-                          resolution=12.0, accuracy=None, n_sub=None)
+        _as_if_trained_on(
+            tmp_path / "runs" / "myscene" / f"ppo_seed{seed}",
+            sub_steps=4,
+            resolution=12.0,
+            accuracy=None,
+            n_sub=None,
+        )
     sc = rolling_env.scenes.load_scene(str(scene))
     assert sc.sub_steps == "auto" and sc.n_sub != 4 and sc.resolution == 64
     out = tmp_path / "out"
-    assert evaluate_main(["--scenes", str(scene), "--runs", str(tmp_path / "runs"),
-                          "--episodes", "1", "--out", str(out)]) == 0
+    assert (
+        evaluate_main(
+            [
+                "--scenes",
+                str(scene),
+                "--runs",
+                str(tmp_path / "runs"),
+                "--episodes",
+                "1",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     note = f"sub_steps 4 (now auto: {sc.n_sub}), resolution 12 (now 64)"
     err = capsys.readouterr().err
     assert err.count("trained on other numerics or reward weights") == 2 and note in err, err
@@ -783,41 +1072,74 @@ def test_a_run_trained_on_other_numerics_is_evaluated_and_marked(trained_run, tm
     assert "| myscene | eq32-feedback | - |" in md
     assert (out / "plots" / "myscene.png").stat().st_size > 0
     model = tmp_path / "runs" / "myscene" / "ppo_seed0" / "model.zip"
-    assert cli_main(["rollout", "--scene", str(scene), "--controller", str(model),
-                     "--out", str(tmp_path / "roll"), "--json"]) == 0
+    assert (
+        cli_main(
+            [
+                "rollout",
+                "--scene",
+                str(scene),
+                "--controller",
+                str(model),
+                "--out",
+                str(tmp_path / "roll"),
+                "--json",
+            ]
+        )
+        == 0
+    )
     assert "trained on other numerics" in capsys.readouterr().err
 
 
-def test_a_run_trained_with_other_reward_weights_is_evaluated_and_marked(trained_run, tmp_path,
-                                                                        capsys):
+def test_a_run_trained_with_other_reward_weights_is_evaluated_and_marked(
+    trained_run, tmp_path, capsys
+):
     """The reward's weights shape learning, not what the comparison scores: a run trained
     with ``w_final`` in its env_kwargs (and so in its recorded fields) is evaluated on the
     plain scene and its note names the weight."""
     import shutil
 
     from agents.evaluate import main as evaluate_main
+
     scene, runs = trained_run
     run = tmp_path / "runs" / "myscene" / "ppo_seed0"
     shutil.copytree(runs / "myscene" / "ppo_seed0", run)
     cfg = _as_if_trained_on(run, w_final=10.0)
-    (run / "config.yml").write_text(yaml.safe_dump(dict(
-        cfg, env_kwargs=dict(cfg["env_kwargs"], w_final=10.0))))
+    (run / "config.yml").write_text(
+        yaml.safe_dump(dict(cfg, env_kwargs=dict(cfg["env_kwargs"], w_final=10.0)))
+    )
     out = tmp_path / "out"
-    assert evaluate_main(["--scenes", str(scene), "--runs", str(tmp_path / "runs"),
-                          "--episodes", "1", "--out", str(out)]) == 0
+    assert (
+        evaluate_main(
+            [
+                "--scenes",
+                str(scene),
+                "--runs",
+                str(tmp_path / "runs"),
+                "--episodes",
+                "1",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     md = (out / "comparison.md").read_text()
     assert "* [1] trained on other numerics or reward weights: w_final 10 (now 0)\n" in md, md
     assert "| myscene | ppo_seed0 [1] | model.zip |" in md, md
     capsys.readouterr()
 
 
-@pytest.mark.parametrize("changes,names", [
-    ({"sub_steps": 4, "mu": 0.3}, ["mu 0.3 vs inf", "sub_steps 4 vs 'auto'"]),  # physics too
-    ({"resolution": 12.0, "episode_steps": 256}, ["episode_steps 256 vs 512"]),  # the task
-    ({"resolution": 12.0, "ticks_per_period": 16}, ["ticks_per_period 16 vs 8"]),
-])
-def test_a_run_trained_on_other_physics_or_task_stays_refused(trained_run, tmp_path, capsys,
-                                                              changes, names):
+@pytest.mark.parametrize(
+    "changes,names",
+    [
+        ({"sub_steps": 4, "mu": 0.3}, ["mu 0.3 vs inf", "sub_steps 4 vs 'auto'"]),  # physics too
+        ({"resolution": 12.0, "episode_steps": 256}, ["episode_steps 256 vs 512"]),  # the task
+        ({"resolution": 12.0, "ticks_per_period": 16}, ["ticks_per_period 16 vs 8"]),
+    ],
+)
+def test_a_run_trained_on_other_physics_or_task_stays_refused(
+    trained_run, tmp_path, capsys, changes, names
+):
     """A recorded scene that differs in a physics or task key is refused as before (exit 2,
     the keys named with the physics first, nothing written), also where its numerics differ
     too; so is a record whose fields do not reproduce its digest (edited by hand: its fields
@@ -825,12 +1147,21 @@ def test_a_run_trained_on_other_physics_or_task_stays_refused(trained_run, tmp_p
     import shutil
 
     from agents.evaluate import main as evaluate_main
+
     scene, runs = trained_run
     run = tmp_path / "runs" / "myscene" / "ppo_seed0"
     shutil.copytree(runs / "myscene" / "ppo_seed0", run)
     cfg = _as_if_trained_on(run, **changes)
-    argv = ["--scenes", str(scene), "--runs", str(tmp_path / "runs"), "--episodes", "1",
-            "--out", str(tmp_path / "out")]
+    argv = [
+        "--scenes",
+        str(scene),
+        "--runs",
+        str(tmp_path / "runs"),
+        "--episodes",
+        "1",
+        "--out",
+        str(tmp_path / "out"),
+    ]
     with pytest.raises(SystemExit) as e:
         evaluate_main(argv)
     err = capsys.readouterr().err
@@ -843,17 +1174,27 @@ def test_a_run_trained_on_other_physics_or_task_stays_refused(trained_run, tmp_p
     assert trained_vs_now.index(names[0]) < trained_vs_now.index(numerics_key), err
     assert not (tmp_path / "out" / "comparison.csv").exists()
     # numerics only, but the digest is not that of the recorded fields: refused
-    (run / "config.yml").write_text(yaml.safe_dump(dict(
-        cfg, scene_fields={k: v for k, v in cfg["scene_fields"].items()
-                           if k not in changes or k in ("sub_steps", "resolution")})))
+    (run / "config.yml").write_text(
+        yaml.safe_dump(
+            dict(
+                cfg,
+                scene_fields={
+                    k: v
+                    for k, v in cfg["scene_fields"].items()
+                    if k not in changes or k in ("sub_steps", "resolution")
+                },
+            )
+        )
+    )
     with pytest.raises(SystemExit) as e:
         evaluate_main(argv)
     err = capsys.readouterr().err
     assert e.value.code == 2 and "content differs" in err, err
 
 
-def test_rollout_cli_refuses_a_model_of_another_scene_and_names_files_by_run(trained_run,
-                                                                             tmp_path, capsys):
+def test_rollout_cli_refuses_a_model_of_another_scene_and_names_files_by_run(
+    trained_run, tmp_path, capsys
+):
     """`rolling-drive rollout --controller <run>/model.zip --scene X` refuses a model whose
     run was trained on other scene content (exit 2, one line); a copy of the scene under
     another name is the same scene.  Output files are named from the run folder: two runs'
@@ -861,49 +1202,102 @@ def test_rollout_cli_refuses_a_model_of_another_scene_and_names_files_by_run(tra
     import shutil
 
     from rolling_env.cli import main as cli_main
+
     scene, runs = trained_run
     model = runs / "myscene" / "ppo_seed0" / "model.zip"
-    assert cli_main(["rollout", "--scene", "default", "--controller", str(model),
-                     "--out", str(tmp_path / "out")]) == 2
+    assert (
+        cli_main(
+            [
+                "rollout",
+                "--scene",
+                "default",
+                "--controller",
+                str(model),
+                "--out",
+                str(tmp_path / "out"),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
     assert err.startswith("rolling-drive rollout: error:") and err.count("\n") == 1, err
     assert "content differs" in err and "mu" in err, err
     other = tmp_path / "runs" / "sac_seed0"
     shutil.copytree(model.parent, other)
     for m in (model, other / "model.zip"):
-        assert cli_main(["rollout", "--scene", "heavy_inf_friction", "--controller", str(m),
-                         "--out", str(tmp_path / "out"), "--json"]) == 0, capsys.readouterr()
+        assert (
+            cli_main(
+                [
+                    "rollout",
+                    "--scene",
+                    "heavy_inf_friction",
+                    "--controller",
+                    str(m),
+                    "--out",
+                    str(tmp_path / "out"),
+                    "--json",
+                ]
+            )
+            == 0
+        ), capsys.readouterr()
     names = sorted(p.name for p in (tmp_path / "out").glob("*.csv"))
-    assert names == ["heavy_inf_friction_ppo_seed0-model_seed0.csv",
-                     "heavy_inf_friction_sac_seed0-model_seed0.csv"], names
+    assert names == [
+        "heavy_inf_friction_ppo_seed0-model_seed0.csv",
+        "heavy_inf_friction_sac_seed0-model_seed0.csv",
+    ], names
 
 
-@pytest.mark.parametrize("entry,name", [
-    ({"n_epoch": 1, "learning_rte": 0.5}, "'learning_rte', 'n_epoch'"),
-    ({"n_envs": 2.7}, "'n_envs' must be an integer"),
-    ({"n_timesteps": 300.9}, "'n_timesteps' must be an integer"),
-    ({"gamma": 1.5}, "'gamma' must be in (0, 1]"),
-    ({"learning_rate": -1e-3}, "'learning_rate' must be in (0, inf)"),
-    ({"learning_rate": "lin_x"}, "'learning_rate' must be a number or 'lin_<number>'"),
-    ({"n_steps": "many"}, "'n_steps' must be an integer"),
-    ({"use_sde": "yes"}, "'use_sde' must be true or false"),
-    ({"policy_kwargs": "dict(activation_fn=os.system)"}, "'policy_kwargs'"),
-    ({"policy_kwargs": "__import__('os').getcwd()"}, "'policy_kwargs'"),
-    ({"policy_kwargs": "dict(net_arch=[64], nett=1)"}, "'policy_kwargs': unknown key(s) ['nett']"),
-    ({"normalize": "{'norm_obs': True, 'clip_ob': 5}"}, "'normalize': unknown key(s) ['clip_ob']"),
-    ({"noise_type": "normal", "noise_std": 0.1}, "PPO takes no action noise"),
-    ({"seed": 1}, "'seed' cannot be set in the YAML"),
-    ({"policy": "CnnPolicy"}, "'policy' must be 'MlpPolicy'"),
-    ({"env_kwargs": {"scene": "default", "bogus": 1}}, "'env_kwargs': unknown scene key 'bogus'"),
-])
+@pytest.mark.parametrize(
+    "entry,name",
+    [
+        ({"n_epoch": 1, "learning_rte": 0.5}, "'learning_rte', 'n_epoch'"),
+        ({"n_envs": 2.7}, "'n_envs' must be an integer"),
+        ({"n_timesteps": 300.9}, "'n_timesteps' must be an integer"),
+        ({"gamma": 1.5}, "'gamma' must be in (0, 1]"),
+        ({"learning_rate": -1e-3}, "'learning_rate' must be in (0, inf)"),
+        ({"learning_rate": "lin_x"}, "'learning_rate' must be a number or 'lin_<number>'"),
+        ({"n_steps": "many"}, "'n_steps' must be an integer"),
+        ({"use_sde": "yes"}, "'use_sde' must be true or false"),
+        ({"policy_kwargs": "dict(activation_fn=os.system)"}, "'policy_kwargs'"),
+        ({"policy_kwargs": "__import__('os').getcwd()"}, "'policy_kwargs'"),
+        (
+            {"policy_kwargs": "dict(net_arch=[64], nett=1)"},
+            "'policy_kwargs': unknown key(s) ['nett']",
+        ),
+        (
+            {"normalize": "{'norm_obs': True, 'clip_ob': 5}"},
+            "'normalize': unknown key(s) ['clip_ob']",
+        ),
+        ({"noise_type": "normal", "noise_std": 0.1}, "PPO takes no action noise"),
+        ({"seed": 1}, "'seed' cannot be set in the YAML"),
+        ({"policy": "CnnPolicy"}, "'policy' must be 'MlpPolicy'"),
+        (
+            {"env_kwargs": {"scene": "default", "bogus": 1}},
+            "'env_kwargs': unknown scene key 'bogus'",
+        ),
+    ],
+)
 def test_train_validates_every_hyperparameter(entry, name, tmp_path, capsys):
     """Unknown or misspelled keys were ignored, fractional n_envs / n_timesteps truncated,
     gamma 1.5 trained: each is one line, exit 2, naming the key, with no run folder."""
     from agents.train import main as train_main
+
     conf = tmp_path / "ppo.yml"
     conf.write_text(yaml.safe_dump({"default": {"n_envs": 1, "n_timesteps": 64, **entry}}))
-    assert train_main(["--algo", "ppo", "--conf", str(conf), "--run-dir", str(tmp_path / "run"),
-                       "--no-progress"]) == 2, f"{entry} was accepted"
+    assert (
+        train_main(
+            [
+                "--algo",
+                "ppo",
+                "--conf",
+                str(conf),
+                "--run-dir",
+                str(tmp_path / "run"),
+                "--no-progress",
+            ]
+        )
+        == 2
+    ), f"{entry} was accepted"
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and name in err, f"{entry}: {err}"
     assert not (tmp_path / "run").exists()
@@ -916,20 +1310,40 @@ def test_td3_ornstein_uhlenbeck_noise_is_rejected_or_used(tmp_path, capsys):
 
     from agents.train import _setup, build_parser
     from agents.train import main as train_main
+
     conf = tmp_path / "td3.yml"
-    entry = {"n_envs": 1, "n_timesteps": 64, "noise_type": "ornstein-uhlenbeck",
-             "noise_std": 0.2, "target_policy_noise": 0.1, "learning_starts": 8,
-             "replay_buffer_kwargs": "dict(handle_timeout_termination=True)"}
+    entry = {
+        "n_envs": 1,
+        "n_timesteps": 64,
+        "noise_type": "ornstein-uhlenbeck",
+        "noise_std": 0.2,
+        "target_policy_noise": 0.1,
+        "learning_starts": 8,
+        "replay_buffer_kwargs": "dict(handle_timeout_termination=True)",
+    }
     conf.write_text(yaml.safe_dump({"default": entry}))
-    args = build_parser().parse_args(["--algo", "td3", "--conf", str(conf), "--run-dir",
-                                      str(tmp_path / "run"), "--no-progress"])
+    args = build_parser().parse_args(
+        ["--algo", "td3", "--conf", str(conf), "--run-dir", str(tmp_path / "run"), "--no-progress"]
+    )
     model = _setup(args)[0]
     assert isinstance(model.action_noise, OrnsteinUhlenbeckActionNoise), model.action_noise
     assert np.allclose(model.action_noise._sigma, 0.2)
     assert model.target_policy_noise == 0.1 and model.learning_starts == 8
     conf.write_text(yaml.safe_dump({"default": dict(entry, noise_type="ou")}))
-    assert train_main(["--algo", "td3", "--conf", str(conf), "--run-dir",
-                       str(tmp_path / "run2"), "--no-progress"]) == 2
+    assert (
+        train_main(
+            [
+                "--algo",
+                "td3",
+                "--conf",
+                str(conf),
+                "--run-dir",
+                str(tmp_path / "run2"),
+                "--no-progress",
+            ]
+        )
+        == 2
+    )
     assert "'noise_type' must be one of" in capsys.readouterr().err
 
 
@@ -940,14 +1354,29 @@ def test_rl_zoo_strings_and_sb3_keywords_reach_the_model(tmp_path):
     import torch
 
     from agents.train import _setup, build_parser
+
     conf = tmp_path / "ppo.yml"
-    conf.write_text(yaml.safe_dump({"default": {
-        "n_envs": 1, "n_timesteps": 64, "n_steps": 32, "batch_size": 32,
-        "target_kl": 0.02, "clip_range_vf": 0.3, "normalize_advantage": False,
-        "learning_rate": "lin_3e-4", "clip_range": "lin_0.2",
-        "policy_kwargs": "dict(net_arch=[16], activation_fn=nn.ReLU)"}}))
-    args = build_parser().parse_args(["--algo", "ppo", "--conf", str(conf), "--run-dir",
-                                      str(tmp_path / "run"), "--no-progress"])
+    conf.write_text(
+        yaml.safe_dump(
+            {
+                "default": {
+                    "n_envs": 1,
+                    "n_timesteps": 64,
+                    "n_steps": 32,
+                    "batch_size": 32,
+                    "target_kl": 0.02,
+                    "clip_range_vf": 0.3,
+                    "normalize_advantage": False,
+                    "learning_rate": "lin_3e-4",
+                    "clip_range": "lin_0.2",
+                    "policy_kwargs": "dict(net_arch=[16], activation_fn=nn.ReLU)",
+                }
+            }
+        )
+    )
+    args = build_parser().parse_args(
+        ["--algo", "ppo", "--conf", str(conf), "--run-dir", str(tmp_path / "run"), "--no-progress"]
+    )
     model = _setup(args)[0]
     assert model.target_kl == 0.02 and model.normalize_advantage is False
     assert model.clip_range_vf(1.0) == 0.3
@@ -963,13 +1392,24 @@ def test_policy_kwargs_as_a_yaml_mapping_resolves_torch_names():
     import torch
 
     from agents.common import check_hyperparams
-    hp = check_hyperparams("sac", {"n_timesteps": 10, "policy_kwargs": {
-        "net_arch": [64], "activation_fn": "nn.ReLU", "optimizer_class": "th.optim.AdamW"}})
+
+    hp = check_hyperparams(
+        "sac",
+        {
+            "n_timesteps": 10,
+            "policy_kwargs": {
+                "net_arch": [64],
+                "activation_fn": "nn.ReLU",
+                "optimizer_class": "th.optim.AdamW",
+            },
+        },
+    )
     kw = hp["kwargs"]["policy_kwargs"]
     assert kw["activation_fn"] is torch.nn.ReLU and kw["optimizer_class"] is torch.optim.AdamW, kw
     with pytest.raises(ValueError, match="policy_kwargs.*nn.NoSuchLayer"):
-        check_hyperparams("sac", {"n_timesteps": 10,
-                                  "policy_kwargs": {"activation_fn": "nn.NoSuchLayer"}})
+        check_hyperparams(
+            "sac", {"n_timesteps": 10, "policy_kwargs": {"activation_fn": "nn.NoSuchLayer"}}
+        )
 
 
 @pytest.mark.parametrize("algo", ["sac", "td3", "ppo"])
@@ -982,17 +1422,35 @@ def test_a_loose_model_zip_is_loaded_with_its_own_algorithm(algo, tmp_path, caps
     from agents.evaluate import model_algo
     from rolling_env.cli import main as cli_main
     from rolling_env.vector import RollingDriveVecEnv
+
     cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[algo]
     path = tmp_path / "loose" / f"{algo}_model.zip"
     path.parent.mkdir()
-    cls("MlpPolicy", RollingDriveVecEnv(1), device="cpu", **(
-        {"buffer_size": 100} if algo != "ppo" else {})).save(path)
+    cls(
+        "MlpPolicy",
+        RollingDriveVecEnv(1),
+        device="cpu",
+        **({"buffer_size": 100} if algo != "ppo" else {}),
+    ).save(path)
     assert model_algo(path) == algo
     agent = load_agent(path, rolling_env.make("default"))
     assert type(agent.model) is cls, f"loaded as {type(agent.model).__name__}"
     assert f"has no {algo}_model_vecnormalize.pkl beside it" in capsys.readouterr().err
-    assert cli_main(["rollout", "--scene", "default", "--controller", str(path), "--out",
-                     str(tmp_path / "out"), "--json"]) == 0
+    assert (
+        cli_main(
+            [
+                "rollout",
+                "--scene",
+                "default",
+                "--controller",
+                str(path),
+                "--out",
+                str(tmp_path / "out"),
+                "--json",
+            ]
+        )
+        == 0
+    )
     assert (tmp_path / "out" / f"default_loose-{algo}_model_seed0.csv").exists()
 
 
@@ -1001,6 +1459,7 @@ def test_a_zip_that_is_no_sb3_model_is_one_line(tmp_path, capsys):
 
     from agents.evaluate import model_algo
     from rolling_env.cli import main as cli_main
+
     junk = tmp_path / "junk.zip"
     junk.write_text("not a zip")
     assert cli_main(["rollout", "--controller", str(junk), "--out", str(tmp_path / "o")]) == 2
@@ -1017,12 +1476,15 @@ def test_a_run_model_without_its_statistics_is_refused(trained_run, tmp_path):
     """A run that normalised observations (config.yml) but whose model lost its VecNormalize
     statistics would act on raw observations: refused, naming the missing file."""
     import shutil
+
     scene, runs = trained_run
     run = tmp_path / "ppo_seed0"
     shutil.copytree(runs / "myscene" / "ppo_seed0", run)
     (run / "model_vecnormalize.pkl").unlink()
-    with pytest.raises(ValueError, match="has no model_vecnormalize.pkl beside it, but its "
-                       "run normalised observations"):
+    with pytest.raises(
+        ValueError,
+        match="has no model_vecnormalize.pkl beside it, but its run normalised observations",
+    ):
         load_agent(run / "model.zip", rolling_env.make(str(scene)))
 
 
@@ -1032,17 +1494,29 @@ def test_a_scene_that_cannot_be_built_is_one_line_naming_its_keys(tmp_path, caps
     line naming the scene keys, nothing written; train says the same."""
     from agents.evaluate import main as evaluate_main
     from agents.train import main as train_main
+
     huge = _scene_file(tmp_path / "huge.yaml", resolution=4096, stroke_roll=0.9)
     with pytest.raises(SystemExit) as e:
-        evaluate_main(["--scenes", str(huge), "--runs", str(tmp_path / "runs"),
-                       "--episodes", "1", "--out", str(tmp_path / "out")])
+        evaluate_main(
+            [
+                "--scenes",
+                str(huge),
+                "--runs",
+                str(tmp_path / "runs"),
+                "--episodes",
+                "1",
+                "--out",
+                str(tmp_path / "out"),
+            ]
+        )
     err = capsys.readouterr().err
     assert e.value.code == 2, err
     last = err.strip().splitlines()[-1]
     assert "'resolution' = 4096" in last and "'stroke_roll' = 0.9" in last, err
     assert not (tmp_path / "out").exists()
-    assert train_main(["--algo", "ppo", "--scene", str(huge), "--run-dir",
-                       str(tmp_path / "run")]) == 2
+    assert (
+        train_main(["--algo", "ppo", "--scene", str(huge), "--run-dir", str(tmp_path / "run")]) == 2
+    )
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "'resolution' = 4096" in err, err
 
@@ -1052,6 +1526,7 @@ def test_evaluate_without_agents_refuses_unless_baselines_only(tmp_path, capsys)
     committed comparison with a baselines-only table, exit 0: now exit 2 naming --runs (and
     the scene) with nothing written; --baselines-only compares the two baselines alone."""
     from agents.evaluate import main as evaluate_main
+
     out = tmp_path / "out"
     base = ["--scenes", "heavy_inf_friction", "--episodes", "1", "--out", str(out)]
     with pytest.raises(SystemExit) as e:
@@ -1079,11 +1554,21 @@ def test_evaluate_bounds_episodes(tmp_path, capsys, monkeypatch):
 
     def reached(*a, **k):
         raise AssertionError("the evaluation started with an unbounded --episodes")
+
     monkeypatch.setattr(ev, "held_out_targets", reached)
     for bad in ("1000000000", "100001", "0", "-3", "2.5"):
         with pytest.raises(SystemExit) as e:
-            ev.main(["--baselines-only", "--scenes", "default", "--episodes", bad,
-                     "--out", str(tmp_path / "out")])
+            ev.main(
+                [
+                    "--baselines-only",
+                    "--scenes",
+                    "default",
+                    "--episodes",
+                    bad,
+                    "--out",
+                    str(tmp_path / "out"),
+                ]
+            )
         err = capsys.readouterr().err
         last = err.strip().splitlines()[-1]
         assert e.value.code == 2 and "--episodes" in last, f"{bad}: {err}"
@@ -1095,14 +1580,25 @@ def test_evaluate_refuses_duplicate_scenes(tmp_path, capsys):
     """--scenes default default evaluated the scene twice and wrote duplicate rows: refused
     naming --scenes, also where two spellings (name, path of the shipped file) have one key."""
     from agents.evaluate import main as evaluate_main
+
     shipped = str(rolling_env.scenes.SCENE_DIR / "default.yaml")
     for scenes in (["default", "default"], ["default", "heavy_inf_friction", shipped]):
         with pytest.raises(SystemExit) as e:
-            evaluate_main(["--baselines-only", "--scenes", *scenes, "--episodes", "1",
-                           "--out", str(tmp_path / "out")])
+            evaluate_main(
+                [
+                    "--baselines-only",
+                    "--scenes",
+                    *scenes,
+                    "--episodes",
+                    "1",
+                    "--out",
+                    str(tmp_path / "out"),
+                ]
+            )
         last = capsys.readouterr().err.strip().splitlines()[-1]
         assert e.value.code == 2 and "--scenes:" in last and "same scene key 'default'" in last, (
-            f"{scenes}: {last}")
+            f"{scenes}: {last}"
+        )
     assert not (tmp_path / "out").exists()
 
 
@@ -1111,11 +1607,22 @@ def test_evaluate_refuses_a_run_named_like_a_baseline(trained_run, tmp_path, cap
     import shutil
 
     from agents.evaluate import main as evaluate_main
+
     scene, runs = trained_run
     shutil.copytree(runs / "myscene" / "ppo_seed0", tmp_path / "runs" / "myscene" / "eq32-feedback")
     with pytest.raises(SystemExit) as e:
-        evaluate_main(["--scenes", str(scene), "--runs", str(tmp_path / "runs"), "--episodes",
-                       "1", "--out", str(tmp_path / "out")])
+        evaluate_main(
+            [
+                "--scenes",
+                str(scene),
+                "--runs",
+                str(tmp_path / "runs"),
+                "--episodes",
+                "1",
+                "--out",
+                str(tmp_path / "out"),
+            ]
+        )
     err = capsys.readouterr().err
     assert e.value.code == 2 and "has the name of a baseline" in err, err
 
@@ -1123,6 +1630,7 @@ def test_evaluate_refuses_a_run_named_like_a_baseline(trained_run, tmp_path, cap
 def _damage(run: Path, kind: str) -> str:
     """Damage one file of a copied run folder; returns the name of the damaged file."""
     import zipfile
+
     cfg = run / "config.yml"
     if kind == "yaml":
         cfg.write_text("scene: [\n")
@@ -1134,7 +1642,7 @@ def _damage(run: Path, kind: str) -> str:
         cfg.write_bytes(b"scene: \xff\xfe\n")
     elif kind == "pkl":
         stats = run / "model_vecnormalize.pkl"
-        stats.write_bytes(stats.read_bytes()[:len(stats.read_bytes()) // 2])
+        stats.write_bytes(stats.read_bytes()[: len(stats.read_bytes()) // 2])
         return stats.name
     elif kind == "pth":
         good = run / "model.zip"
@@ -1142,7 +1650,7 @@ def _damage(run: Path, kind: str) -> str:
         with zipfile.ZipFile(good) as zi, zipfile.ZipFile(bad, "w") as zo:
             for item in zi.infolist():
                 data = zi.read(item.filename)
-                zo.writestr(item, data[:len(data) // 2] if item.filename == "policy.pth" else data)
+                zo.writestr(item, data[: len(data) // 2] if item.filename == "policy.pth" else data)
         bad.replace(good)
         return good.name
     elif kind == "meta":
@@ -1155,8 +1663,9 @@ def _damage(run: Path, kind: str) -> str:
     return cfg.name
 
 
-@pytest.mark.parametrize("kind", ["yaml", "list", "env_kwargs", "utf8", "pkl", "pth", "meta",
-                                  "npz"])
+@pytest.mark.parametrize(
+    "kind", ["yaml", "list", "env_kwargs", "utf8", "pkl", "pth", "meta", "npz"]
+)
 def test_damaged_run_files_are_one_line_naming_the_file(trained_run, tmp_path, capsys, kind):
     """A config.yml that is invalid YAML, a list, has env_kwargs [1, 2] or is not UTF-8, a
     truncated model_vecnormalize.pkl, a model.zip with a damaged policy.pth (and, for
@@ -1167,6 +1676,7 @@ def test_damaged_run_files_are_one_line_naming_the_file(trained_run, tmp_path, c
 
     from agents.evaluate import main as evaluate_main
     from rolling_env.cli import main as cli_main
+
     scene, runs = trained_run
     run = tmp_path / "runs" / "myscene" / "ppo_seed0"
     shutil.copytree(runs / "myscene" / "ppo_seed0", run)
@@ -1175,38 +1685,62 @@ def test_damaged_run_files_are_one_line_naming_the_file(trained_run, tmp_path, c
     name = _damage(run, kind)
     out = tmp_path / "out"
     if kind not in ("meta", "npz"):  # the rollout reads neither
-        code = cli_main(["rollout", "--scene", str(scene), "--controller",
-                         str(run / "model.zip"), "--out", str(out)])
+        code = cli_main(
+            [
+                "rollout",
+                "--scene",
+                str(scene),
+                "--controller",
+                str(run / "model.zip"),
+                "--out",
+                str(out),
+            ]
+        )
         err = capsys.readouterr().err
         assert code == 2 and err.count("\n") == 1, f"{kind}: exit {code}: {err}"
         assert err.startswith("rolling-drive rollout: error:") and name in err, f"{kind}: {err}"
     with pytest.raises(SystemExit) as e:
-        evaluate_main(["--scenes", str(scene), "--runs", str(tmp_path / "runs"),
-                       "--episodes", "1", "--out", str(out)])
+        evaluate_main(
+            [
+                "--scenes",
+                str(scene),
+                "--runs",
+                str(tmp_path / "runs"),
+                "--episodes",
+                "1",
+                "--out",
+                str(out),
+            ]
+        )
     last = capsys.readouterr().err.strip().splitlines()[-1]
     assert e.value.code == 2 and name in last and "Traceback" not in last, f"{kind}: {last}"
     assert not [p for p in out.rglob("*") if p.is_file()], f"{kind}: files written"
 
 
-@pytest.mark.parametrize("algo,policy_kwargs,name", [
-    ("ppo", "dict(net_arch=[-5])", "net_arch must be a list"),
-    ("ppo", "dict(net_arch=[100000, 100000])", "each an integer in [1, 1024]"),
-    ("ppo", "dict(net_arch=[0])", "net_arch must be a list"),
-    ("ppo", "dict(net_arch=[8, 8, 8, 8, 8, 8, 8, 8, 8])",
-     "at most 8 hidden-layer widths"),
-    ("ppo", "dict(net_arch=dict(pi=[64], qf=[64]))", "takes the keys pi and vf"),
-    ("sac", "dict(net_arch=dict(pi=[64], vf=[64]))", "takes the keys pi and qf"),
-    ("ppo", "dict(log_std_init=1e308)", "log_std_init must be in [-20, 2]"),
-    ("ppo", "dict(activation_fn=nn.Dropout)", "activation_fn must be a torch.nn activation"),
-    ("ppo", "dict(activation_fn=nn.GLU)", "activation_fn must be a torch.nn activation"),
-    ("ppo", "dict(activation_fn=th.optim.Adam)", "activation_fn must be a torch.nn activation"),
-    ("ppo", "dict(ortho_init=2)", "ortho_init must be true or false"),
-    ("sac", "dict(n_critics=0)", "n_critics must be an integer in [1, 10]"),
-    ("td3", "dict(optimizer_class=nn.ReLU)", "optimizer_class must be a torch.optim"),
-    ("ppo", "dict(optimizer_kwargs=dict(weight_decay=-1))",
-     "ActorCriticPolicy cannot be built with"),
-    ("sac", "dict(optimizer_kwargs=dict(bogus=1))", "SACPolicy cannot be built with"),
-])
+@pytest.mark.parametrize(
+    "algo,policy_kwargs,name",
+    [
+        ("ppo", "dict(net_arch=[-5])", "net_arch must be a list"),
+        ("ppo", "dict(net_arch=[100000, 100000])", "each an integer in [1, 1024]"),
+        ("ppo", "dict(net_arch=[0])", "net_arch must be a list"),
+        ("ppo", "dict(net_arch=[8, 8, 8, 8, 8, 8, 8, 8, 8])", "at most 8 hidden-layer widths"),
+        ("ppo", "dict(net_arch=dict(pi=[64], qf=[64]))", "takes the keys pi and vf"),
+        ("sac", "dict(net_arch=dict(pi=[64], vf=[64]))", "takes the keys pi and qf"),
+        ("ppo", "dict(log_std_init=1e308)", "log_std_init must be in [-20, 2]"),
+        ("ppo", "dict(activation_fn=nn.Dropout)", "activation_fn must be a torch.nn activation"),
+        ("ppo", "dict(activation_fn=nn.GLU)", "activation_fn must be a torch.nn activation"),
+        ("ppo", "dict(activation_fn=th.optim.Adam)", "activation_fn must be a torch.nn activation"),
+        ("ppo", "dict(ortho_init=2)", "ortho_init must be true or false"),
+        ("sac", "dict(n_critics=0)", "n_critics must be an integer in [1, 10]"),
+        ("td3", "dict(optimizer_class=nn.ReLU)", "optimizer_class must be a torch.optim"),
+        (
+            "ppo",
+            "dict(optimizer_kwargs=dict(weight_decay=-1))",
+            "ActorCriticPolicy cannot be built with",
+        ),
+        ("sac", "dict(optimizer_kwargs=dict(bogus=1))", "SACPolicy cannot be built with"),
+    ],
+)
 def test_train_validates_policy_kwargs_values(algo, policy_kwargs, name, tmp_path, capsys):
     """Bad values inside policy_kwargs reached torch: a negative width (RuntimeError), a huge
     allocation, NaN in the first update from log_std_init 1e308 (exit 1, a run folder with
@@ -1214,13 +1748,26 @@ def test_train_validates_policy_kwargs_values(algo, policy_kwargs, name, tmp_pat
     policy_kwargs, exit 2, no run folder; what only building the policy finds (an optimizer
     keyword) too."""
     from agents.train import main as train_main
+
     conf = tmp_path / f"{algo}.yml"
     entry = {"n_envs": 1, "n_timesteps": 64, "policy_kwargs": policy_kwargs}
     if algo != "ppo":
         entry.update(buffer_size=100, learning_starts=8)
     conf.write_text(yaml.safe_dump({"default": entry}))
-    assert train_main(["--algo", algo, "--conf", str(conf), "--run-dir", str(tmp_path / "run"),
-                       "--no-progress"]) == 2, f"{policy_kwargs} was accepted"
+    assert (
+        train_main(
+            [
+                "--algo",
+                algo,
+                "--conf",
+                str(conf),
+                "--run-dir",
+                str(tmp_path / "run"),
+                "--no-progress",
+            ]
+        )
+        == 2
+    ), f"{policy_kwargs} was accepted"
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "hyper-parameter 'policy_kwargs'" in err and name in err, err
     assert not (tmp_path / "run").exists()
@@ -1231,13 +1778,22 @@ def test_shipped_policy_kwargs_and_valid_ones_pass():
     import torch
 
     from agents.common import check_hyperparams
+
     for algo in ("ppo", "sac", "td3"):
         for key in ("RollingDrive-v0", *rolling_env.list_scenes()):
             check_hyperparams(algo, load_hyperparams(algo, key))
-    pk = check_hyperparams("sac", {"n_timesteps": 8, "policy_kwargs": (
-        f"dict(net_arch=dict(pi={[1024] * 8}, qf=[]), activation_fn=nn.SiLU, log_std_init=-20, "
-        "n_critics=10, clip_mean=1.5, use_expln=True, optimizer_class=th.optim.AdamW, "
-        "optimizer_kwargs=dict(weight_decay=0.01))")})["kwargs"]["policy_kwargs"]
+    pk = check_hyperparams(
+        "sac",
+        {
+            "n_timesteps": 8,
+            "policy_kwargs": (
+                f"dict(net_arch=dict(pi={[1024] * 8}, qf=[]), activation_fn=nn.SiLU, "
+                f"log_std_init=-20, "
+                "n_critics=10, clip_mean=1.5, use_expln=True, optimizer_class=th.optim.AdamW, "
+                "optimizer_kwargs=dict(weight_decay=0.01))"
+            ),
+        },
+    )["kwargs"]["policy_kwargs"]
     assert pk["activation_fn"] is torch.nn.SiLU and pk["net_arch"]["pi"] == [1024] * 8, pk
 
 
@@ -1249,11 +1805,14 @@ def test_exponent_numbers_in_hyperparameter_yaml(tmp_path):
     (a schedule)."""
     from agents.common import check_hyperparams
     from agents.train import _setup, build_parser
+
     conf = tmp_path / "ppo.yml"
-    conf.write_text("default:\n  n_timesteps: 1e3\n  n_envs: 1\n  learning_rate: 3e-4\n"
-                    "  gamma: 9e-1\n  n_steps: 6.4e+1\n  batch_size: 32\n  ent_coef: 1e-3\n"
-                    "  clip_range: lin_2e-1\n  policy_kwargs: {net_arch: [8], log_std_init: -1e0}\n"
-                    "  normalize: {norm_obs: true, clip_obs: 1e1}\n")
+    conf.write_text(
+        "default:\n  n_timesteps: 1e3\n  n_envs: 1\n  learning_rate: 3e-4\n"
+        "  gamma: 9e-1\n  n_steps: 6.4e+1\n  batch_size: 32\n  ent_coef: 1e-3\n"
+        "  clip_range: lin_2e-1\n  policy_kwargs: {net_arch: [8], log_std_init: -1e0}\n"
+        "  normalize: {norm_obs: true, clip_obs: 1e1}\n"
+    )
     assert yaml.safe_load("x: 3e-4")["x"] == "3e-4", "PyYAML's reading changed: the test is moot"
     hp = load_hyperparams("ppo", "default", conf)
     checked = check_hyperparams("ppo", hp)
@@ -1262,12 +1821,15 @@ def test_exponent_numbers_in_hyperparameter_yaml(tmp_path):
     assert kw["learning_rate"] == 3e-4 and kw["gamma"] == 0.9 and kw["n_steps"] == 64, kw
     assert kw["ent_coef"] == 1e-3 and kw["policy_kwargs"]["log_std_init"] == -1.0, kw
     assert checked["normalize"]["clip_obs"] == 10.0, checked["normalize"]
-    args = build_parser().parse_args(["--algo", "ppo", "--conf", str(conf), "--run-dir",
-                                      str(tmp_path / "run"), "--no-progress"])
+    args = build_parser().parse_args(
+        ["--algo", "ppo", "--conf", str(conf), "--run-dir", str(tmp_path / "run"), "--no-progress"]
+    )
     model = _setup(args)[0]
     assert model.learning_rate == 3e-4 and model.gamma == 0.9 and model.n_steps == 64
-    for key, value, msg in (("n_timesteps", "1.5e0", "'n_timesteps' must be an integer"),
-                            ("gamma", "2e0", "'gamma' must be in (0, 1]")):
+    for key, value, msg in (
+        ("n_timesteps", "1.5e0", "'n_timesteps' must be an integer"),
+        ("gamma", "2e0", "'gamma' must be in (0, 1]"),
+    ):
         entry = {"n_timesteps": "8", key: value}  # n_timesteps given once
         conf.write_text("default:\n" + "".join(f"  {k}: {v}\n" for k, v in entry.items()))
         with pytest.raises(ValueError) as e:
@@ -1276,8 +1838,21 @@ def test_exponent_numbers_in_hyperparameter_yaml(tmp_path):
 
 
 def _overwrite_argv(run):
-    return ["--algo", "ppo", "--n-timesteps", "64", "--n-envs", "1", "--eval-freq", "64",
-            "--eval-episodes", "1", "--no-progress", "--run-dir", str(run)]
+    return [
+        "--algo",
+        "ppo",
+        "--n-timesteps",
+        "64",
+        "--n-envs",
+        "1",
+        "--eval-freq",
+        "64",
+        "--eval-episodes",
+        "1",
+        "--no-progress",
+        "--run-dir",
+        str(run),
+    ]
 
 
 def test_overwrite_keeps_the_earlier_run_when_the_new_one_fails(tmp_path, monkeypatch, capsys):
@@ -1291,6 +1866,7 @@ def test_overwrite_keeps_the_earlier_run_when_the_new_one_fails(tmp_path, monkey
 
     from agents.train import main as train_main
     from agents.train import staging_folder
+
     run = tmp_path / "run"
     assert train_main(_overwrite_argv(run)) == 0
     before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
@@ -1298,6 +1874,7 @@ def test_overwrite_keeps_the_earlier_run_when_the_new_one_fails(tmp_path, monkey
 
     def boom(self, *a, **k):
         raise RuntimeError("raised inside learn")
+
     monkeypatch.setattr(sb3.PPO, "learn", boom)
     with pytest.raises(RuntimeError, match="raised inside learn"):
         train_main(_overwrite_argv(run) + ["--overwrite"])
@@ -1321,11 +1898,17 @@ def test_overwrite_stopped_by_sigterm_keeps_both_runs(tmp_path):
     """SIGTERM during an --overwrite run: exit 143, the earlier run untouched, and the new
     run's loadable checkpoint in <run>.overwrite (where the message says it is)."""
     from agents.train import main as train_main
+
     run = tmp_path / "run"
     assert train_main(_overwrite_argv(run)) == 0
     before = (run / "model.zip").read_bytes()
-    proc = subprocess.Popen(_train(tmp_path, "--overwrite", timesteps=10 ** 7), cwd=REPO,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        _train(tmp_path, "--overwrite", timesteps=10**7),
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     staging = tmp_path / "run.overwrite"
     deadline = time.time() + 120
     while not (staging / "evaluations.npz").exists() and time.time() < deadline:
@@ -1348,6 +1931,7 @@ def test_scene_runs_skips_hidden_and_overwrite_folders(tmp_path):
     that ``--overwrite`` could not delete) and ``<run>.overwrite`` (a replacement that failed
     or was stopped) were evaluated as extra controllers."""
     from agents.evaluate import scene_runs
+
     base = tmp_path / "runs" / "default"
     for name in ("ppo_seed0", "sac_seed0", ".ppo_seed0.replaced-123", "ppo_seed0.overwrite"):
         (base / name).mkdir(parents=True)
@@ -1365,18 +1949,43 @@ def test_training_is_reproducible_from_the_seed(algo, tmp_path):
     import torch
 
     from agents.train import main as train_main
+
     conf = tmp_path / f"{algo}.yml"
-    entry = {"n_envs": 2, "n_timesteps": 256, "normalize": "{'norm_obs': True}",
-             "policy_kwargs": "dict(net_arch=[16])"}
-    entry.update({"n_steps": 64, "batch_size": 32, "n_epochs": 2} if algo == "ppo" else
-                 {"buffer_size": 512, "learning_starts": 32, "batch_size": 16})
+    entry = {
+        "n_envs": 2,
+        "n_timesteps": 256,
+        "normalize": "{'norm_obs': True}",
+        "policy_kwargs": "dict(net_arch=[16])",
+    }
+    entry.update(
+        {"n_steps": 64, "batch_size": 32, "n_epochs": 2}
+        if algo == "ppo"
+        else {"buffer_size": 512, "learning_starts": 32, "batch_size": 16}
+    )
     conf.write_text(yaml.safe_dump({"default": entry}))
 
     def train(seed, name):
         run = tmp_path / name
-        assert train_main(["--algo", algo, "--conf", str(conf), "--seed", str(seed),
-                           "--run-dir", str(run), "--eval-freq", "128", "--eval-episodes", "1",
-                           "--no-progress"]) == 0
+        assert (
+            train_main(
+                [
+                    "--algo",
+                    algo,
+                    "--conf",
+                    str(conf),
+                    "--seed",
+                    str(seed),
+                    "--run-dir",
+                    str(run),
+                    "--eval-freq",
+                    "128",
+                    "--eval-episodes",
+                    "1",
+                    "--no-progress",
+                ]
+            )
+            == 0
+        )
         agent = load_agent(run / "model.zip", rolling_env.make("default"))
         params = {k: v.clone() for k, v in agent.model.policy.state_dict().items()}
         with np.load(run / "evaluations.npz") as d:
@@ -1389,7 +1998,9 @@ def test_training_is_reproducible_from_the_seed(algo, tmp_path):
     assert p1.keys() == p2.keys()
     for k in p1:
         assert torch.equal(p1[k], p2[k]), f"{algo}: {k} differs between two runs with seed 5"
-    assert np.array_equal(m1, m2) and np.array_equal(e1, e2), \
+    assert np.array_equal(m1, m2) and np.array_equal(e1, e2), (
         f"{algo}: VecNormalize statistics or evaluation log differ between two runs with seed 5"
-    assert any(not torch.equal(p1[k], p3[k]) for k in p1), \
+    )
+    assert any(not torch.equal(p1[k], p3[k]) for k in p1), (
         f"{algo}: seeds 5 and 6 gave the same parameters: the seed is not used"
+    )

@@ -5,6 +5,7 @@ for self-consistency (round trips, identities, which only rounding limits), 1e-5
 for limits taken at a large but finite argument, 1e-4 relative for a finite-difference slope,
 0.1 % for material constants quoted to four digits.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -50,7 +51,7 @@ def test_hertz_broadcast_and_contact_radius():
     R = 1e-3
     a = an.contact_radius(d, R)
     assert isinstance(a, np.ndarray) and a.shape == (3,)
-    assert np.allclose(a ** 2, R * d, rtol=1e-14, atol=0), f"a^2={a**2}"
+    assert np.allclose(a**2, R * d, rtol=1e-14, atol=0), f"a^2={a**2}"
     assert isinstance(an.contact_radius(1e-7, R), float)
     N = an.hertz_force(d[:, None], np.array([1e-3, 2e-3]), 115e9)
     assert N.shape == (3, 2)
@@ -62,13 +63,14 @@ def test_stiffness_and_natural_frequency():
     k = an.tangential_stiffness(a1, G_star)
     assert abs(k - 2 * a1 * G_star) < 1e-12 * k
     wn = an.natural_frequency(a1, G_star, m)
-    assert abs(wn ** 2 * m - k) < 1e-12 * k, f"omega_n={wn}"
+    assert abs(wn**2 * m - k) < 1e-12 * k, f"omega_n={wn}"
 
 
 # ----------------------------------------------------------------------------- working points
-@pytest.mark.parametrize("delta,eps,w,ref", [(0.93, 0.2, 2.2, 0.012537),
-                                             (0.7, 0.1, 2.5, 0.085565),
-                                             (0.5, 0.3, 5.0, 0.184893)])
+@pytest.mark.parametrize(
+    "delta,eps,w,ref",
+    [(0.93, 0.2, 2.2, 0.012537), (0.7, 0.1, 2.5, 0.085565), (0.5, 0.3, 5.0, 0.184893)],
+)
 def test_eq32_samples(delta, eps, w, ref):
     """Sample values of Eq. 32 (physics.md), six printed digits."""
     val = an.eq32(delta, eps, w)
@@ -105,13 +107,12 @@ def test_steady_forces_vanish_sum_at_eq29():
     """Eqs. 27-28: at the Eq. 29 working point the steady forces cancel, T1 + T2 = 0."""
     delta, eps, a1, G_star = 0.7, 0.1, 1.5e-5, 95e9
     T1, T2 = an.steady_forces(delta, eps, an.eq29(delta, eps), a1, G_star)
-    scale = 2 * G_star * a1 ** 2
+    scale = 2 * G_star * a1**2
     assert abs(T1 + T2) < 1e-14 * scale, f"T1={T1} T2={T2}"
     assert abs(T1 - scale * (1 - eps - an.eq29(delta, eps))) < 1e-12 * scale
 
 
-@pytest.mark.parametrize("delta,w", list(itertools.product([0.0, 0.3, 0.93, 1.0],
-                                                           [2.0, 2.2, 7.0])))
+@pytest.mark.parametrize("delta,w", list(itertools.product([0.0, 0.3, 0.93, 1.0], [2.0, 2.2, 7.0])))
 def test_impulse_coefficients_give_eq32(delta, w):
     """For w >= 2: (1 - eps) P/Q = Eq. 32 = working_point_ratio, and I(eq32) = 0."""
     eps = 0.15
@@ -131,11 +132,14 @@ def test_working_point_continuous_at_w2(delta):
     below, at, above = (an.working_point_ratio(delta, eps, w) for w in (2 - h, 2.0, 2 + h))
     assert abs(at - an.eq32(delta, eps, 2.0)) < 1e-15, "w = 2 must give Eq. 32"
     assert abs(below - at) < 10 * h and abs(above - at) < 10 * h, f"{below} {at} {above}"
-    assert abs(below - 2 * at + above) < 10 * h ** 2, f"kink at w = 2: {below} {at} {above}"
+    assert abs(below - 2 * at + above) < 10 * h**2, f"kink at w = 2: {below} {at} {above}"
     w = 2 - h
-    plain = (1 - eps) * (2 * w * (1 - delta) - 4 / 3 * (1 - delta ** 1.5)) \
+    plain = (
+        (1 - eps)
+        * (2 * w * (1 - delta) - 4 / 3 * (1 - delta**1.5))
         / (2 * w * (1 + delta) - 4 / 3 + 4 * delta)
-    assert abs(below - plain) < h ** 3, f"correction {below - plain:.3g} is not O(h^3)"
+    )
+    assert abs(below - plain) < h**3, f"correction {below - plain:.3g} is not O(h^3)"
 
 
 def test_working_point_ratio_broadcast():
@@ -147,8 +151,9 @@ def test_working_point_ratio_broadcast():
 
 
 # ----------------------------------------------------------------------------- inversions
-GRID = list(itertools.product(np.linspace(0.05, 1.0, 9), [-0.5, 0.0, 0.4, 0.9],
-                              [2.0, 2.2, 3.7, 11.0, 50.0]))
+GRID = list(
+    itertools.product(np.linspace(0.05, 1.0, 9), [-0.5, 0.0, 0.4, 0.9], [2.0, 2.2, 3.7, 11.0, 50.0])
+)
 
 
 @pytest.mark.parametrize("delta,eps,w", GRID)
@@ -176,7 +181,9 @@ def test_eq32_and_inverse_at_large_w(w):
     w >= 1e25, where the cubic term vanished next to the w-sized ones)."""
     for delta in (0.05, 0.5, 0.9):
         v = an.eq32(delta, 0.1, w)
-        assert abs(v - an.eq29(delta, 0.1)) <= 2.0 / w, f"w={w}: {v} vs Eq. 29 {an.eq29(delta, 0.1)}"
+        assert abs(v - an.eq29(delta, 0.1)) <= 2.0 / w, (
+            f"w={w}: {v} vs Eq. 29 {an.eq29(delta, 0.1)}"
+        )
         assert abs(an.invert_eq32_delta(v, 0.1, w) - delta) < 1e-10, f"w={w}, delta={delta}"
         assert an.working_point_ratio(delta, 0.1, w) == pytest.approx(v, rel=1e-13)
 
@@ -212,8 +219,10 @@ def test_mindlin_initial_stiffness_is_2aG():
     N = an.hertz_force(D, R, E_STAR)
     us = an.mindlin_ustar(MU, D, E_STAR, G_STAR)
     h = 1e-6 * us
-    slope = (an.mindlin_force(h, MU, N, D, E_STAR, G_STAR)
-             - an.mindlin_force(-h, MU, N, D, E_STAR, G_STAR)) / (2 * h)
+    slope = (
+        an.mindlin_force(h, MU, N, D, E_STAR, G_STAR)
+        - an.mindlin_force(-h, MU, N, D, E_STAR, G_STAR)
+    ) / (2 * h)
     k = an.tangential_stiffness(an.contact_radius(D, R), G_STAR)
     assert abs(slope - k) < 1e-4 * k, f"slope {slope:.6g} vs 2 a G* {k:.6g}"
 
@@ -272,8 +281,9 @@ BAD = [
 ]
 
 
-@pytest.mark.parametrize("fn,args,name", BAD, ids=[f"{f.__name__}-{n}-{i}"
-                                                   for i, (f, _, n) in enumerate(BAD)])
+@pytest.mark.parametrize(
+    "fn,args,name", BAD, ids=[f"{f.__name__}-{n}-{i}" for i, (f, _, n) in enumerate(BAD)]
+)
 def test_bad_input_names_parameter(fn, args, name):
     """Out-of-range, NaN and inf input raise ValueError naming the parameter."""
     with pytest.raises(ValueError, match=name):
@@ -288,14 +298,17 @@ def test_error_message_gives_range():
         an.invert_eq32_delta(0.95, 0.1, 2.5)
 
 
-@pytest.mark.parametrize("call, name", [
-    (lambda: an.eq32("a", 0.1, 2.5), "delta"),
-    (lambda: an.eq32(0.5, None, 2.5), "eps"),
-    (lambda: an.eq29(0.5, [0.1, "x"]), "eps"),
-    (lambda: an.eq32(True, 0.1, 2.5), "delta"),
-    (lambda: an.hertz_force(1e-7, 1e-3, 1 + 2j), "E_star"),
-    (lambda: an.working_point_ratio(0.5, 0.1, [[2.5], [2.5, 3.0]]), "w"),
-])
+@pytest.mark.parametrize(
+    "call, name",
+    [
+        (lambda: an.eq32("a", 0.1, 2.5), "delta"),
+        (lambda: an.eq32(0.5, None, 2.5), "eps"),
+        (lambda: an.eq29(0.5, [0.1, "x"]), "eps"),
+        (lambda: an.eq32(True, 0.1, 2.5), "delta"),
+        (lambda: an.hertz_force(1e-7, 1e-3, 1 + 2j), "E_star"),
+        (lambda: an.working_point_ratio(0.5, 0.1, [[2.5], [2.5, 3.0]]), "w"),
+    ],
+)
 def test_non_numeric_input_names_the_parameter(call, name):
     """Strings, None, booleans, complex numbers and ragged lists are a ValueError naming the
     parameter (a string gave numpy's 'could not convert string to float', which names none)."""
@@ -317,16 +330,22 @@ def test_delta_zero_gives_one_minus_eps_everywhere(eps, w):
             assert an.invert_eq32_delta(1 - eps, eps, w) < 1e-12
 
 
-@pytest.mark.parametrize("call", [
-    lambda: an.eq32([0.5, 0.6], [0.1, 0.2, 0.3], 3.0),
-    lambda: an.steady_forces(0.5, [0.1, 0.2], [0.0, 0.1, 0.2], 1e-5, 9e10),
-    lambda: an.mindlin_force(np.zeros(4), 0.2, np.ones(3), 1e-7, 1e11, 9e10),
-])
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda: an.eq32([0.5, 0.6], [0.1, 0.2, 0.3], 3.0),
+        lambda: an.steady_forces(0.5, [0.1, 0.2], [0.0, 0.1, 0.2], 1e-5, 9e10),
+        lambda: an.mindlin_force(np.zeros(4), 0.2, np.ones(3), 1e-7, 1e11, 9e10),
+    ],
+)
 def test_shapes_that_do_not_broadcast_are_named(call):
     """numpy's "operands could not be broadcast" names no parameter: the error names the
     function and the shapes of the parameters given as arrays."""
-    with pytest.raises(ValueError, match=r"the parameters must broadcast together .*got shapes "
-                                         r"\w+ \(\d,\), \w+ \(\d,\)$"):
+    with pytest.raises(
+        ValueError,
+        match=r"the parameters must broadcast together .*got shapes "
+        r"\w+ \(\d,\), \w+ \(\d,\)$",
+    ):
         call()
 
 

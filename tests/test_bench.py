@@ -1,4 +1,5 @@
 """The benchmark's arithmetic and probes (timings themselves stay out of the test suite)."""
+
 import math
 import subprocess
 import sys
@@ -10,9 +11,16 @@ from rolling_env import bench
 from rolling_env.bench import ratio_bound
 
 
-@pytest.mark.parametrize("single,serial,one,threads,eff", [
-    (136e3, 450e3, 520e3, 2, 1.0), (170e3, 448e3, 523e3, 2, 1.0), (50e3, 1e6, 1e6, 4, 1.0),
-    (183.6e3, 945e3, 945e3, 2, 0.94), (136e3, 450e3, 520e3, 2, 0.8)])
+@pytest.mark.parametrize(
+    "single,serial,one,threads,eff",
+    [
+        (136e3, 450e3, 520e3, 2, 1.0),
+        (170e3, 448e3, 523e3, 2, 1.0),
+        (50e3, 1e6, 1e6, 4, 1.0),
+        (183.6e3, 945e3, 945e3, 2, 0.94),
+        (136e3, 450e3, 520e3, 2, 0.8),
+    ],
+)
 def test_ratio_bound_speedup_reaches_the_target(single, serial, one, threads, eff):
     """A physics tick f = speedup_needed times faster makes batched / single equal the target:
     the single env keeps its Python layer and runs the faster tick, the batched env runs the
@@ -47,8 +55,11 @@ def test_memory_probe_ignores_the_parents_peak():
     exec)."""
     big = np.ones(50_000_000)
     code = bench._PEAK + "import numpy\nprint(peak())"
-    kib = int(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                             check=True).stdout)
+    kib = int(
+        subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, check=True
+        ).stdout
+    )
     assert big[-1] == 1.0 and kib < 200 * 1024, f"child reported a peak of {kib / 1024:.0f} MiB"
 
 
@@ -68,16 +79,44 @@ def test_load_section_reports_ratios_of_the_same_run():
     """The report's load table divides each condition's rates by that condition's serial
     rate, names the path the default ended on, and sets the threads' idle gains beside the
     host's own parallelism."""
-    rows = [dict(condition="idle", serial=100.0, threads=180.0, default=175.0,
-                 default_threads=2, sb3_batched=90.0, sb3_dummy=30.0, load_average=1.23),
-            dict(condition="busy", serial=80.0, threads=20.0, default=78.0, default_threads=1,
-                 sb3_batched=60.0, sb3_dummy=20.0),
-            dict(condition="work", serial=50.0, threads=55.0, default=54.0, default_threads=2)]
-    load = dict(num_envs=256, threads=2, sb3_envs=8, segment=32, work_seconds=1e-3,
-                serial_step_seconds=1.1e-3, rows=rows)
+    rows = [
+        dict(
+            condition="idle",
+            serial=100.0,
+            threads=180.0,
+            default=175.0,
+            default_threads=2,
+            sb3_batched=90.0,
+            sb3_dummy=30.0,
+            load_average=1.23,
+        ),
+        dict(
+            condition="busy",
+            serial=80.0,
+            threads=20.0,
+            default=78.0,
+            default_threads=1,
+            sb3_batched=60.0,
+            sb3_dummy=20.0,
+        ),
+        dict(condition="work", serial=50.0, threads=55.0, default=54.0, default_threads=2),
+    ]
+    load = dict(
+        num_envs=256,
+        threads=2,
+        sb3_envs=8,
+        segment=32,
+        work_seconds=1e-3,
+        serial_step_seconds=1.1e-3,
+        rows=rows,
+    )
     host = dict(num_envs=256, alone=100.0, pair=190.0, ratio=1.9)
-    sweep = {"sweep": [dict(num_envs=256, serial=100.0, threaded=170.0, default=168.0),
-                       dict(num_envs=1024, serial=100.0, threaded=185.0, default=180.0)]}
+    sweep = {
+        "sweep": [
+            dict(num_envs=256, serial=100.0, threaded=170.0, default=168.0),
+            dict(num_envs=1024, serial=100.0, threaded=185.0, default=180.0),
+        ]
+    }
     text = "\n".join(bench._load_section(load, host, sweep))
     assert "| 100 | 180 | 175 | 1.75 | 1.80 | 2 threads | 1.2 |" in text, text
     assert "| 80 | 20 | 78 | 0.97 | 0.25 | the serial kernel | nan |" in text, text

@@ -1,4 +1,6 @@
-"""The env kernels' numba cache is valid only for the physics they embed (rolling_env._cachestamp)."""
+"""The env kernels' numba cache is valid only for the physics they embed
+(rolling_env._cachestamp)."""
+
 from __future__ import annotations
 
 import subprocess
@@ -61,11 +63,12 @@ def test_no_stale_physics_across_processes(tmp_path):
         cmd = [sys.executable, "envk.py", *args]
         if not wait:
             return subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, text=True)
-        return subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True,
-                              check=True).stdout.strip()
+        return subprocess.run(
+            cmd, cwd=tmp_path, capture_output=True, text=True, check=True
+        ).stdout.strip()
 
-    assert run("now") == "1.5"                    # old physics cached
-    old = run("wait", wait=False)                 # imports the old physics, then waits
+    assert run("now") == "1.5"  # old physics cached
+    old = run("wait", wait=False)  # imports the old physics, then waits
     t0 = time.time()
     while not (tmp_path / "ready").exists():
         assert time.time() - t0 < 60, "old process did not start"
@@ -83,8 +86,11 @@ def test_fallback_drops_cache_files_only_when_sources_change(tmp_path):
     src.write_text("x = 1\n")
     cache = tmp_path / "cache"
     cache.mkdir()
-    for name in ("_envkernel.f-10.py311.nbi", "_envkernel.f-10.py311.1.nbc",
-                 "_kernel.g-5.py311.nbi"):
+    for name in (
+        "_envkernel.f-10.py311.nbi",
+        "_envkernel.f-10.py311.1.nbc",
+        "_kernel.g-5.py311.nbi",
+    ):
         (cache / name).write_text("stale")
     d1 = sources_digest(src)
     assert drop_if_stale(cache, "_envkernel", d1), "first sight of the sources must drop"

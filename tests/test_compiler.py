@@ -1,5 +1,6 @@
 """The kernels' compiler pipeline (``rolling_env._compiler``): LLVM's predicated loop tails
 for our kernels only, LLVM's defaults for everything compiled before and after."""
+
 import re
 
 import numpy as np
@@ -9,13 +10,13 @@ from numba.core.errors import TypingError
 
 from rolling_env import _compiler
 
-SRC = '''
+SRC = """
 def loop_sum(x, n):
     s = 0.0
     for i in range(n):
         s += x[i] * 2.0 + 1.0
     return s
-'''
+"""
 
 
 def _fresh(**opts):
@@ -35,8 +36,11 @@ def _asm(fn) -> str:
 def _code(asm: str) -> list[str]:
     """The instructions of the function itself, without symbol names (numba numbers each
     compiled function differently)."""
-    return [re.sub(r"_ZN\w+|\.L\w+", "SYM", ln.split("#")[0].strip())
-            for ln in asm.splitlines() if ln.startswith("\t") and not ln.startswith("\t.")]
+    return [
+        re.sub(r"_ZN\w+|\.L\w+", "SYM", ln.split("#")[0].strip())
+        for ln in asm.splitlines()
+        if ln.startswith("\t") and not ln.startswith("\t.")
+    ]
 
 
 def test_options_apply_only_where_known_to_exist_and_help():
@@ -45,10 +49,12 @@ def test_options_apply_only_where_known_to_exist_and_help():
     assert _compiler.options_supported(11, feats, None), "LLVM 11 has the option's spelling"
     assert not _compiler.options_supported(10, feats, None), "LLVM 10 spelled it otherwise"
     assert not _compiler.options_supported(23, feats, None), "an LLVM not measured yet"
-    assert not _compiler.options_supported(22, "+avx2,+fma,-avx512f,-avx512vl", None), \
+    assert not _compiler.options_supported(22, "+avx2,+fma,-avx512f,-avx512vl", None), (
         "AVX2 only: masked stores are slow on some CPUs"
-    assert not _compiler.options_supported(22, feats, "generic"), \
+    )
+    assert not _compiler.options_supported(22, feats, "generic"), (
         "numba targets another CPU than the host (NUMBA_CPU_NAME)"
+    )
 
 
 def test_pipeline_changes_our_loops_and_leaves_other_compiles_as_they_were():
@@ -57,7 +63,8 @@ def test_pipeline_changes_our_loops_and_leaves_other_compiles_as_they_were():
     after = _code(_asm(_fresh()))
     assert after == before, (
         "a numba function compiled after one of our kernels got other machine code: the "
-        "LLVM options leaked out of our compile")
+        "LLVM options leaked out of our compile"
+    )
     if _compiler.ENABLED:
         assert ours != before, "the pipeline did not change the loop (options not applied)"
         assert any("{%k" in ln for ln in ours), "no masked (predicated) loop tail in our loop"
@@ -82,10 +89,14 @@ def test_every_kernel_compiles_under_the_pipeline():
     would silently lose the loop options; ``_compiler`` on the dispatcher is numba's."""
     from rolling_env import _envkernel as EK
     from rolling_env import _kernel as K
-    kernels = {f"{m.__name__}.{n}": v for m in (K, EK) for n, v in vars(m).items()
-               if hasattr(v, "py_func")}
+
+    kernels = {
+        f"{m.__name__}.{n}": v for m in (K, EK) for n, v in vars(m).items() if hasattr(v, "py_func")
+    }
     assert len(kernels) > 20, f"kernels not found: {sorted(kernels)}"
-    other = sorted(n for n, d in kernels.items()
-                   if getattr(getattr(d, "_compiler", None), "pipeline_class", None)
-                   is not _compiler.Compiler)
+    other = sorted(
+        n
+        for n, d in kernels.items()
+        if getattr(getattr(d, "_compiler", None), "pipeline_class", None) is not _compiler.Compiler
+    )
     assert not other, f"kernels compiled outside rolling_env._compiler.Compiler: {other}"

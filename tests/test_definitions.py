@@ -6,6 +6,7 @@ Coulomb law of a fully sliding contact, the observations against their declared 
 the w < 2 working point from the analytic formula of physics.md.  Each assert states its
 tolerance and what it was based on (values measured on this project's machine).
 """
+
 from __future__ import annotations
 
 import math
@@ -24,15 +25,14 @@ from rolling_env.scenes import SCENE_DIR
 
 GEO = ex.Geometry()
 A1 = GEO.a1
-D1 = A1 ** 2 / GEO.R
+D1 = A1**2 / GEO.R
 N1 = float(analytic.hertz_force(D1, GEO.R, GEO.E_star))
 SHIPPED = sorted(p.stem for p in SCENE_DIR.glob("*.yaml"))
 
 
 def _drive(mu=math.inf, m=math.inf, stroke=(0.0, 0.0), resolution=32):
     params = DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=m)
-    return Drive(params, a_ref=A1, resolution=resolution, stroke=stroke, a_max=A1,
-                 t_ref=GEO.tau)
+    return Drive(params, a_ref=A1, resolution=resolution, stroke=stroke, a_max=A1, t_ref=GEO.tau)
 
 
 def test_shipped_scenes_found():
@@ -68,19 +68,24 @@ def test_reward_from_its_definition(scene):
         _, reward, terminated, truncated, info = env.step(env.action_space.sample())
         target = env.unwrapped.target
         assert info["target"] == target, (
-            f"{scene} tick {k}: info target {info['target']} vs the env's {target}")
+            f"{scene} tick {k}: info target {info['target']} vs the env's {target}"
+        )
         track = -sc.w_track * abs(target - info["xstar"]) / sc.target_max
         wear = -sc.w_wear * info["slip_work"] / wear_ref
         scale = abs(track) + abs(wear) + 1e-300
         assert abs(reward - (track + wear)) <= 1e-12 * scale, (
             f"{scene} tick {k}: reward {reward!r} vs its definition {track + wear!r} "
-            f"(track {track!r}, wear {wear!r})")
+            f"(track {track!r}, wear {wear!r})"
+        )
         assert abs(info["reward_track"] - track) <= 1e-12 * scale, (
-            f"{scene} tick {k}: info reward_track {info['reward_track']!r} vs {track!r}")
+            f"{scene} tick {k}: info reward_track {info['reward_track']!r} vs {track!r}"
+        )
         assert abs(info["reward_wear"] - wear) <= 1e-12 * scale, (
-            f"{scene} tick {k}: info reward_wear {info['reward_wear']!r} vs {wear!r}")
+            f"{scene} tick {k}: info reward_wear {info['reward_wear']!r} vs {wear!r}"
+        )
         assert abs(info["reward_track"] + info["reward_wear"] - reward) <= 1e-12 * scale, (
-            f"{scene} tick {k}: the info's terms do not add up to the reward")
+            f"{scene} tick {k}: the info's terms do not add up to the reward"
+        )
         assert info["slip_work"] >= 0.0, f"{scene} tick {k}: negative slip work {info['slip_work']}"
         wear_sum += abs(wear)
         total_sum += abs(track) + abs(wear)
@@ -89,7 +94,8 @@ def test_reward_from_its_definition(scene):
     if math.isfinite(sc.mu):
         assert wear_sum > 1e-6 * total_sum, (
             f"{scene}: random actions should make the contact slide (wear share "
-            f"{wear_sum / total_sum:.2e}); the wear term would go unchecked")
+            f"{wear_sum / total_sum:.2e}); the wear term would go unchecked"
+        )
     else:
         assert wear_sum == 0.0, f"{scene}: infinite friction, yet a wear term {wear_sum}"
 
@@ -103,8 +109,9 @@ def test_terminal_reward_from_its_definition(scene):
     agree to the bit.  Relative tolerance 1e-12 (the kernel multiplies by 1/tolerance)."""
     w_final, steps = 7.5, 40
     env = gym.make("RollingDrive-v0", scene=scene, w_final=w_final, episode_steps=steps)
-    venv = gym.make_vec("RollingDrive-v0", num_envs=1, scene=scene, w_final=w_final,
-                        episode_steps=steps)
+    venv = gym.make_vec(
+        "RollingDrive-v0", num_envs=1, scene=scene, w_final=w_final, episode_steps=steps
+    )
     sc = env.unwrapped.scene
     rng = np.random.default_rng(3)
     finals = 0
@@ -116,14 +123,17 @@ def test_terminal_reward_from_its_definition(scene):
         _, reward, _, truncated, info = env.step(a)
         _, vrew, _, vtrunc, vinfo = venv.step(a[None])
         assert vrew[0] == reward and vinfo["reward_final"][0] == info["reward_final"], (
-            f"{scene} tick {k}: batched env {vrew[0]!r} vs single {reward!r}")
+            f"{scene} tick {k}: batched env {vrew[0]!r} vs single {reward!r}"
+        )
         last = (k + 1) % steps == 0
         want = -w_final * abs(info["target"] - info["xstar"]) / sc.tolerance if last else 0.0
         assert abs(info["reward_final"] - want) <= 1e-12 * abs(want), (
-            f"{scene} tick {k}: reward_final {info['reward_final']!r}, want {want!r}")
+            f"{scene} tick {k}: reward_final {info['reward_final']!r}, want {want!r}"
+        )
         total = info["reward_track"] + info["reward_wear"] + info["reward_final"]
         assert abs(reward - total) <= 1e-12 * abs(reward), (
-            f"{scene} tick {k}: the info's terms {total!r} do not add up to {reward!r}")
+            f"{scene} tick {k}: the info's terms {total!r} do not add up to {reward!r}"
+        )
         assert truncated == last
         if last:
             finals += 1
@@ -153,12 +163,15 @@ def _xstar_vs_trapezoid(mu, eps, r, ticks_per_half, n_sub, periods=2):
     return float(np.max(np.abs(xs - trap))), float(np.max(np.abs(xs)))
 
 
-@pytest.mark.parametrize("mu,eps,r,n_sub", [
-    (math.inf, 0.1, 1.0, 1),  # infinite friction, one sub-step per tick
-    (math.inf, 0.1, 1.0, 4),
-    (0.3, 0.9, 1.0, 4),       # finite friction: the contact slides
-    (0.3, 0.995, 0.5, 4),     # finite friction, partial slip
-])
+@pytest.mark.parametrize(
+    "mu,eps,r,n_sub",
+    [
+        (math.inf, 0.1, 1.0, 1),  # infinite friction, one sub-step per tick
+        (math.inf, 0.1, 1.0, 4),
+        (0.3, 0.9, 1.0, 4),  # finite friction: the contact slides
+        (0.3, 0.995, 0.5, 4),  # finite friction, partial slip
+    ],
+)
 def test_xstar_is_the_integral_of_vstar(mu, eps, r, n_sub):
     """x* is the time integral of v*: against the trapezoid rule over the recorded ticks
     (32 / 64 / 128 ticks per half period, i.e. 64-256 ticks per runner period, with n_sub
@@ -177,10 +190,12 @@ def test_xstar_is_the_integral_of_vstar(mu, eps, r, n_sub):
     ratios = [errs[i] / errs[i + 1] for i in range(2)]
     assert all(3.5 < q < 4.5 for q in ratios), (
         f"x* - integral of v* must fall 4x per halved tick (second order): errors "
-        f"{errs}, ratios {ratios}")
+        f"{errs}, ratios {ratios}"
+    )
     assert errs[-1] < 1e-4 * xmax, (
         f"x* - integral of v* = {errs[-1]:.3e} m at 128 ticks per half period, above 1e-4 of "
-        f"max |x*| = {xmax:.3e} m")
+        f"max |x*| = {xmax:.3e} m"
+    )
 
 
 # ----------------------------------------------------------------------------- 3. slip work
@@ -198,8 +213,13 @@ def _rolling_full_sliding(eps, n_sub, n=200, mu=0.3, omega_R=0.1, dt=1e-5, m=1.0
     in all); friction accelerates the runner to a few percent of the creep rate."""
     drv = _drive(mu=mu, m=m, stroke=(0.0, omega_R * dt * n))
     drv.reset()
-    out = drv.run(dt_tick=dt, n_sub=n_sub, omega_R=np.full(n, omega_R),
-                  v=np.full(n, eps * omega_R), d=np.full(n, D1))
+    out = drv.run(
+        dt_tick=dt,
+        n_sub=n_sub,
+        omega_R=np.full(n, omega_R),
+        v=np.full(n, eps * omega_R),
+        d=np.full(n, D1),
+    )
     # the creep distance of each tick: integral of omega R - v - v* = (omega R - v) dt - dx*
     dxs = np.diff(np.concatenate([[0.0], out["xstar"]]))
     creep = (1.0 - eps) * omega_R * dt - dxs
@@ -219,8 +239,10 @@ def test_full_sliding_slip_power_is_coulomb(eps):
     slip = out["slip_work"][100:]
     assert np.all(slip > 0.0), "a fully sliding contact must do slip work in every tick"
     dev = float(np.max(np.abs(slip / coulomb[100:] - 1.0)))
-    assert dev < 1e-4, (f"slip work per tick vs mu N x creep distance (~{coulomb[-1]:.6e} J):"
-                        f" largest relative deviation {dev:.2e} (eps {eps})")
+    assert dev < 1e-4, (
+        f"slip work per tick vs mu N x creep distance (~{coulomb[-1]:.6e} J):"
+        f" largest relative deviation {dev:.2e} (eps {eps})"
+    )
 
 
 def test_tangential_drag_slip_power_is_coulomb():
@@ -233,14 +255,14 @@ def test_tangential_drag_slip_power_is_coulomb():
     vel = 4.0 * ustar / (n * dt)  # 4 u* in n ticks
     drv = _drive(mu=mu, m=1e3)
     drv.reset()
-    out = drv.run(dt_tick=dt, n_sub=4, omega_R=np.zeros(n), v=np.full(n, vel),
-                  d=np.full(n, D1))
+    out = drv.run(dt_tick=dt, n_sub=4, omega_R=np.zeros(n), v=np.full(n, vel), d=np.full(n, D1))
     dxs = np.diff(np.concatenate([[0.0], out["xstar"]]))
     coulomb = mu * N1 * np.abs(vel * dt + dxs)
-    dev = float(np.max(np.abs(out["slip_work"][n // 2 + 1:] / coulomb[n // 2 + 1:] - 1.0)))
+    dev = float(np.max(np.abs(out["slip_work"][n // 2 + 1 :] / coulomb[n // 2 + 1 :] - 1.0)))
     assert dev < 1e-9, f"dragged sliding contact: slip work per tick off mu N |s| dt by {dev:.2e}"
     assert np.all(out["slip_work"][: n // 8] < 0.5 * coulomb[: n // 8]), (
-        "below u*/2 the contact mostly sticks: slip work per tick must stay well below mu N v dt")
+        "below u*/2 the contact mostly sticks: slip work per tick must stay well below mu N v dt"
+    )
 
 
 def test_slip_work_vanishes_with_infinite_friction():
@@ -252,7 +274,8 @@ def test_slip_work_vanishes_with_infinite_friction():
     d, u, v = wave.ticks(2, 32)
     out = drv.run(dt_tick=wave.dt_tick(32), n_sub=2, omega_R=u, v=v, d=d)
     assert np.all(out["slip_work"] == 0.0), (
-        f"slip work up to {np.abs(out['slip_work']).max()} J per tick with mu = inf")
+        f"slip work up to {np.abs(out['slip_work']).max()} J per tick with mu = inf"
+    )
     assert drv.energy["slip"] == 0.0, drv.energy
 
 
@@ -260,8 +283,7 @@ def _free_runner_sliding(n_sub):
     """Free runner (omega_n/Omega = 0.5), mu 0.3, square wave delta 0.7, eps 0.9, w 2.5:
     the contact slides in both steps; 2 periods, 16 ticks per half period."""
     wave = SquareWave(0.7, 0.9, 2.5, A1, GEO.R, GEO.tau)
-    drv = _drive(mu=0.3, m=ex.natural_frequency_mass(0.5, wave, GEO.G_star),
-                 stroke=wave.stroke)
+    drv = _drive(mu=0.3, m=ex.natural_frequency_mass(0.5, wave, GEO.G_star), stroke=wave.stroke)
     drv.reset()
     d, u, v = wave.ticks(2, 16)
     out = drv.run(dt_tick=wave.dt_tick(16), n_sub=n_sub, omega_R=u, v=v, d=d)
@@ -284,14 +306,19 @@ def test_energy_balance_closes_with_the_reported_slip_work(case):
     residual, e = _ledger_with_tick_slip(drv, slip_ticks)
     assert slip_ticks > 0.9 * e["work_in"], (
         f"{case}: slip {slip_ticks:.3e} J of {e['work_in']:.3e} J put in; the bound below "
-        "needs a slip-dominated case")
+        "needs a slip-dominated case"
+    )
     rel = residual / e["work_in"]
-    assert abs(rel) < 5e-5, (f"{case}: energy residual {rel:.2e} of the work put in "
-                             f"(slip {slip_ticks / e['work_in']:.3f} of it), bound 5e-5")
+    assert abs(rel) < 5e-5, (
+        f"{case}: energy residual {rel:.2e} of the work put in "
+        f"(slip {slip_ticks / e['work_in']:.3f} of it), bound 5e-5"
+    )
     assert abs(e["residual"] / e["work_in"]) < 5e-5, (
-        f"{case}: the ledger's own residual {e['residual'] / e['work_in']:.2e}, bound 5e-5")
+        f"{case}: the ledger's own residual {e['residual'] / e['work_in']:.2e}, bound 5e-5"
+    )
     assert abs(slip_ticks - e["slip"]) <= 1e-12 * e["slip"], (
-        f"{case}: per-tick slip work sums to {slip_ticks!r}, the ledger has {e['slip']!r}")
+        f"{case}: per-tick slip work sums to {slip_ticks!r}, the ledger has {e['slip']!r}"
+    )
 
 
 # ----------------------------------------------------------------------------- 4. observations
@@ -305,8 +332,9 @@ CORNERS = {
 
 
 def _obs_cases():
-    return ([pytest.param(s, {}, id=s) for s in SHIPPED]
-            + [pytest.param(sc, ov, id=name) for name, (sc, ov) in CORNERS.items()])
+    return [pytest.param(s, {}, id=s) for s in SHIPPED] + [
+        pytest.param(sc, ov, id=name) for name, (sc, ov) in CORNERS.items()
+    ]
 
 
 @pytest.mark.parametrize("scene,overrides", _obs_cases())
@@ -330,25 +358,34 @@ def test_observations_inside_the_observation_space(scene, overrides):
             obs, _, terminated, truncated, info = env.step(action)
             assert space.contains(obs), (
                 f"{scene} {overrides} tick {k}: observation outside the space "
-                f"(dtype {obs.dtype}, min {obs.min()}, max {obs.max()}): {obs}")
+                f"(dtype {obs.dtype}, min {obs.min()}, max {obs.max()}): {obs}"
+            )
             vmax = max(vmax, abs(info["vstar"]) / v_ref)
             if terminated or truncated:
                 obs, _ = env.reset()
                 assert space.contains(obs), f"{scene}: reset observation outside the space"
     if overrides.get("runner_mass") == 1e-7:
-        assert vmax > 10.0, (f"{scene} {overrides}: |v*| reached only {vmax:.3g} velocity "
-                             "scales; the velocity clip is not exercised")
+        assert vmax > 10.0, (
+            f"{scene} {overrides}: |v*| reached only {vmax:.3g} velocity "
+            "scales; the velocity clip is not exercised"
+        )
 
 
 # ----------------------------------------------------------------------------- 5. w < 2
-W_BELOW_TWO = [(0.25, 0.1, 1.5), (0.09, 0.2, 1.3), (0.16, 0.0, 1.4), (0.36, 0.3, 1.6),
-               (0.04, 0.1, 1.2), (0.25, -0.3, 1.55)]
+W_BELOW_TWO = [
+    (0.25, 0.1, 1.5),
+    (0.09, 0.2, 1.3),
+    (0.16, 0.0, 1.4),
+    (0.36, 0.3, 1.6),
+    (0.04, 0.1, 1.2),
+    (0.25, -0.3, 1.55),
+]
 W_TOL = 4e-6
 
 
 def _without_correction(delta, eps, w):
     """(1 - eps) P/Q with the impulse coefficients of Eq. 32 alone (no (2 - w)^3/6 term)."""
-    P = 2 * w * (1 - delta) - 4 / 3 * (1 - delta ** 1.5)
+    P = 2 * w * (1 - delta) - 4 / 3 * (1 - delta**1.5)
     Q = 2 * w * (1 + delta) - 4 / 3 + 4 * delta
     return (1 - eps) * P / Q
 
@@ -365,7 +402,8 @@ def test_w_below_two_correction_to_simulation_accuracy(delta, eps, w):
     bare = _without_correction(delta, eps, w)
     assert abs(ref - bare) > 300 * W_TOL * abs(ref), (
         f"the correction moves the result by only {abs(ref - bare) / abs(ref):.2e}: "
-        "not resolved by this tolerance")
+        "not resolved by this tolerance"
+    )
     for offset in (0.0, 0.25, 0.5, 0.75):
         r = ex.working_point(delta, eps, w, resolution=512, grid_offset=offset)
         assert r["steady"], f"no periodic state at {delta, eps, w}: {r}"
@@ -374,10 +412,11 @@ def test_w_below_two_correction_to_simulation_accuracy(delta, eps, w):
             f"simulated working point {r['simulated']!r} vs the w < 2 formula {ref!r} at "
             f"(delta, eps, w) = {delta, eps, w}, grid offset {offset}: relative error "
             f"{err:.2e}, tolerance {W_TOL:.0e} (without the term: "
-            f"{(bare - ref) / ref:.2e})")
+            f"{(bare - ref) / ref:.2e})"
+        )
     k = (2 - w) ** 3 / 6
-    P = 2 * w * (1 - delta) - 4 / 3 * (1 - delta ** 1.5) + k
+    P = 2 * w * (1 - delta) - 4 / 3 * (1 - delta**1.5) + k
     Q = 2 * w * (1 + delta) - 4 / 3 + 4 * delta + k
     assert abs(ref - (1 - eps) * P / Q) <= 1e-13 * abs(ref), (
-        f"working_point_ratio {ref!r} vs (1 - eps) P/Q with k = (2 - w)^3/6: "
-        f"{(1 - eps) * P / Q!r}")
+        f"working_point_ratio {ref!r} vs (1 - eps) P/Q with k = (2 - w)^3/6: {(1 - eps) * P / Q!r}"
+    )

@@ -1,4 +1,5 @@
 """RollingDrive-v0 checked like Gymnasium's own envs (tests/envs/test_envs.py)."""
+
 from __future__ import annotations
 
 import math
@@ -25,6 +26,7 @@ def test_shipped_scenes():
 @pytest.mark.parametrize("scene", SCENES)
 def test_gymnasium_check_env_no_warnings(scene):
     from gymnasium.utils.env_checker import check_env
+
     env = gym.make("RollingDrive-v0", scene=scene)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -36,6 +38,7 @@ def test_gymnasium_check_env_no_warnings(scene):
 @pytest.mark.parametrize("scene", SCENES)
 def test_sb3_check_env_no_warnings(scene):
     from stable_baselines3.common.env_checker import check_env
+
     env = gym.make("RollingDrive-v0", scene=scene).unwrapped
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -83,7 +86,9 @@ def test_copied_env_resets_like_a_fresh_one(copier):
     """A copy made mid-episode must step and reset its own physics: its kernel views and
     the drive it resets are the same arrays."""
     import copy
+
     from rolling_env.env import RollingDriveEnv
+
     env = RollingDriveEnv("default")
     env.reset(seed=1)
     for _ in range(300):
@@ -100,7 +105,8 @@ def test_copied_env_resets_like_a_fresh_one(copier):
         o1, r1, *_, i1 = clone.step(a)
         o2, r2, *_, i2 = fresh.step(a)
         assert np.array_equal(o1, o2) and r1 == r2 and i1 == i2, (
-            f"{copier}d env after reset differs from a fresh env: reward {r1} vs {r2}")
+            f"{copier}d env after reset differs from a fresh env: reward {r1} vs {r2}"
+        )
         assert clone.drive.xstar == i1["xstar"], "drive and kernel state out of step"
 
 
@@ -110,6 +116,7 @@ def test_copy_of_a_rendered_env_renders_its_own_state(copier):
     draws its own, the same frame as the original's for the same state, and each then
     follows its own state."""
     import copy
+
     env = gym.make("RollingDrive-v0", render_mode="rgb_array")
     env.reset(seed=0)
     env.step(np.array([0.5, 0.5, 0.0], np.float32))
@@ -147,10 +154,13 @@ def test_truncation_by_time_limit_and_reset_after():
     assert not term and not trunc
 
 
-@pytest.mark.parametrize("make", [
-    lambda **kw: gym.make("RollingDrive-v0", **kw),
-    lambda **kw: rolling_env.make("default", **kw),
-])
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda **kw: gym.make("RollingDrive-v0", **kw),
+        lambda **kw: rolling_env.make("default", **kw),
+    ],
+)
 def test_episode_ends_at_the_scene_episode_steps(make):
     """gym.make and rolling_env.make truncate at the (overridden) episode_steps, exactly when
     the observation's time_fraction reaches 1."""
@@ -167,21 +177,30 @@ def test_episode_ends_at_the_scene_episode_steps(make):
 
 
 def test_time_limit_longer_than_the_episode_is_rejected():
-    with pytest.raises(ValueError, match=r"max_episode_steps must be an integer in \[1, 512\]"
-                       r".*episode_steps=1000"):
+    with pytest.raises(
+        ValueError,
+        match=r"max_episode_steps must be an integer in \[1, 512\]"
+        r".*episode_steps=1000",
+    ):
         rolling_env.make("default", max_episode_steps=1000)
     with pytest.raises(ValueError, match="episode_steps"):
-        gym.make_vec("RollingDrive-v0", num_envs=2, vectorization_mode="vector_entry_point",
-                     max_episode_steps=1000)
+        gym.make_vec(
+            "RollingDrive-v0",
+            num_envs=2,
+            vectorization_mode="vector_entry_point",
+            max_episode_steps=1000,
+        )
 
 
-@pytest.mark.parametrize("bad", [0, -3, 2.5, math.inf, math.nan, True, "100", np.bool_(True),
-                                 1e20])
+@pytest.mark.parametrize("bad", [0, -3, 2.5, math.inf, math.nan, True, "100", np.bool_(True), 1e20])
 def test_bad_time_limits_are_rejected_without_the_lengthen_hint(bad):
     """Only a too-long limit that episode_steps can take (<= 1e8) suggests it; the rest get
     the range (inf was an OverflowError, True was accepted as 1)."""
-    with pytest.raises(ValueError, match=r"max_episode_steps must be an integer in \[1, 512\]"
-                       r"[^;]*got") as e:
+    with pytest.raises(
+        ValueError,
+        match=r"max_episode_steps must be an integer in \[1, 512\]"
+        r"[^;]*got",
+    ) as e:
         rolling_env.make("default", max_episode_steps=bad)
     assert "lengthen" not in str(e.value), str(e.value)
 
@@ -215,10 +234,20 @@ def test_target_option_and_sampled_range():
     assert info["target"] == -3e-7
 
 
-@pytest.mark.parametrize("bad", [np.array([np.nan, 0, 0]), np.array([0, np.inf, 0]),
-                                 np.zeros(2), np.zeros((3, 1)), np.array([1.5, 0, 0]),
-                                 np.array([1 + 2j, 0, 0]), np.array(["1", "0", "0"]),
-                                 [True, False, False], [0.1, None, 0.0]])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        np.array([np.nan, 0, 0]),
+        np.array([0, np.inf, 0]),
+        np.zeros(2),
+        np.zeros((3, 1)),
+        np.array([1.5, 0, 0]),
+        np.array([1 + 2j, 0, 0]),
+        np.array(["1", "0", "0"]),
+        [True, False, False],
+        [0.1, None, 0.0],
+    ],
+)
 def test_bad_actions_raise(bad):
     env = gym.make("RollingDrive-v0").unwrapped
     env.reset(seed=0)
@@ -250,6 +279,7 @@ def test_scene_range_corners_build_and_stay_finite():
     rejected with a ValueError at construction or runs with finite observations, rewards and
     info values (in-range values such as period = 1e-200 s once crashed deep inside)."""
     from rolling_env.scenes import _SPEC
+
     keys = sorted(k for k, v in _SPEC.items() if v[0] is float)
     rng = np.random.default_rng(11)
     built = 0
@@ -259,8 +289,13 @@ def test_scene_range_corners_build_and_stay_finite():
             _, lo, hi, _, _ = _SPEC[str(k)]
             pick = rng.integers(0, 3)
             top = hi if math.isfinite(hi) else 1e6  # inf (mu) itself is drawn as an end
-            ov[str(k)] = (lo if pick == 0 else hi if pick == 1 else
-                          float(math.exp(rng.uniform(math.log(max(lo, 1e-300)), math.log(top)))))
+            ov[str(k)] = (
+                lo
+                if pick == 0
+                else hi
+                if pick == 1
+                else float(math.exp(rng.uniform(math.log(max(lo, 1e-300)), math.log(top))))
+            )
         ov["sub_steps"] = int(rng.choice([1, 2, 8]))
         ov["resolution"] = float(rng.choice([1.0, 16.0]))
         try:
@@ -274,13 +309,23 @@ def test_scene_range_corners_build_and_stay_finite():
             obs, r, _, _, info = env.step(a.astype(np.float32))
             vals = [r] + [v for v in info.values() if isinstance(v, float)]
             assert np.all(np.isfinite(obs)) and all(math.isfinite(v) for v in vals), (
-                f"non-finite output at step {t} with overrides {ov}")
+                f"non-finite output at step {t} with overrides {ov}"
+            )
     assert built >= 20, f"only {built} of 80 corner scenes were valid: the sample tests little"
 
 
-@pytest.mark.parametrize("key,value", [("period", 1e-200), ("G_star", 1e-300), ("N_max", 1e-320),
-                                       ("omega_R_max", 5e-324), ("mu", 5e-324),
-                                       ("target_max", 5e-324), ("R", 1e-300)])
+@pytest.mark.parametrize(
+    "key,value",
+    [
+        ("period", 1e-200),
+        ("G_star", 1e-300),
+        ("N_max", 1e-320),
+        ("omega_R_max", 5e-324),
+        ("mu", 5e-324),
+        ("target_max", 5e-324),
+        ("R", 1e-300),
+    ],
+)
 def test_scene_values_whose_scales_underflow_are_rejected(key, value):
     with pytest.raises(ValueError, match=f"scene key '{key}' must be in"):
         gym.make("RollingDrive-v0", **{key: value})
@@ -290,6 +335,7 @@ def test_scene_objects_are_checked_too():
     """A Scene built or replaced with dataclasses (bypassing Scene.replace) is checked like a
     file (period = 1e-200 crashed with ZeroDivisionError)."""
     import dataclasses
+
     bad = dataclasses.replace(load_scene("default"), period=1e-200)
     with pytest.raises(ValueError, match="scene key 'period' must be in"):
         gym.make("RollingDrive-v0", scene=bad)
@@ -317,6 +363,7 @@ def test_render_rgb_array():
     for _ in range(5):
         env.step(np.array([0.5, 0.5, 0.5], np.float32))
     import matplotlib
+
     before = dict(matplotlib.rcParams)
     frame = env.render()
     assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
@@ -331,17 +378,20 @@ def _raw(name="default"):
         return yaml.safe_load(f)
 
 
-@pytest.mark.parametrize("mutate,match", [
-    (lambda d: d.update(bogus=1), "unknown scene key 'bogus'"),
-    (lambda d: d.pop("mu"), "missing key"),
-    (lambda d: d.update(mu="lots"), "'mu' must be a number"),
-    (lambda d: d.update(runner_mass=-1.0), "'runner_mass' must be in"),
-    (lambda d: d.update(sub_steps=2.5), "'sub_steps' must be an integer"),
-    (lambda d: d.update(target_both_signs="yes"), "'target_both_signs' must be true or false"),
-    (lambda d: d.update(N_min=2.0), "'N_min' must be < N_max"),
-    (lambda d: d.update(name="../../x"), "'name' must be a file name"),
-    (lambda d: d.update(name=""), "'name' must be a file name"),
-])
+@pytest.mark.parametrize(
+    "mutate,match",
+    [
+        (lambda d: d.update(bogus=1), "unknown scene key 'bogus'"),
+        (lambda d: d.pop("mu"), "missing key"),
+        (lambda d: d.update(mu="lots"), "'mu' must be a number"),
+        (lambda d: d.update(runner_mass=-1.0), "'runner_mass' must be in"),
+        (lambda d: d.update(sub_steps=2.5), "'sub_steps' must be an integer"),
+        (lambda d: d.update(target_both_signs="yes"), "'target_both_signs' must be true or false"),
+        (lambda d: d.update(N_min=2.0), "'N_min' must be < N_max"),
+        (lambda d: d.update(name="../../x"), "'name' must be a file name"),
+        (lambda d: d.update(name=""), "'name' must be a file name"),
+    ],
+)
 def test_scene_validation(mutate, match):
     d = _raw()
     mutate(d)
@@ -362,9 +412,11 @@ def test_scene_file_errors_name_the_file(tmp_path):
     with pytest.raises(ValueError, match="duplicate key 'mu'"):
         load_scene(dup)
     from rolling_env.scenes import _UniqueKeyLoader
+
     doc = "a: {<<: {p: 1, q: 2}, p: 3}\nb: {<<: [{p: 1}, {p: 2, q: 1}], r: 1}"
     assert yaml.load(doc, Loader=_UniqueKeyLoader) == yaml.safe_load(doc), (
-        "a key overriding a merged one is not a duplicate")
+        "a key overriding a merged one is not a duplicate"
+    )
     merged = tmp_path / "merged.yaml"  # YAML merge keys work as with yaml.safe_load
     merged.write_text(text.replace("w_wear: 0.5", "w_wear: 0.5\nx: &a {p: 1}\ny: {<<: *a}"))
     with pytest.raises(ValueError, match="unknown scene key 'x'"):
@@ -376,7 +428,8 @@ def test_scene_file_errors_name_the_file(tmp_path):
     ok = tmp_path / "ok.yaml"
     ok.write_text(text)
     assert load_scene(ok) == load_scene("default").replace(name="default"), (
-        "a copy of a shipped scene must load unchanged")
+        "a copy of a shipped scene must load unchanged"
+    )
 
 
 def test_overrides_validated_and_applied():
@@ -392,15 +445,18 @@ def test_scene_features_pick_the_kernel():
     """Leaving out: infinite friction keeps no friction-limit array, no load keeps no load term."""
     inf = gym.make("RollingDrive-v0", scene="heavy_inf_friction").unwrapped.drive
     loaded = gym.make("RollingDrive-v0", scene="loaded").unwrapped.drive
-    assert inf._mu is None and inf.L.shape[0] == 0 and inf.cells.shape[0] == 3, \
+    assert inf._mu is None and inf.L.shape[0] == 0 and inf.cells.shape[0] == 3, (
         f"infinite friction keeps {inf.L.shape[0]} friction rows"
+    )
     assert inf._load is None
     assert loaded._mu is not None and loaded._load is not None
 
 
 def test_registration_without_import():
-    code = ("import gymnasium as gym; env = gym.make('rolling_env:RollingDrive-v0'); "
-            "env.reset(seed=0); print(env.step(env.action_space.sample())[0].shape)")
+    code = (
+        "import gymnasium as gym; env = gym.make('rolling_env:RollingDrive-v0'); "
+        "env.reset(seed=0); print(env.step(env.action_space.sample())[0].shape)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "(13,)", out.stderr
 
@@ -408,6 +464,7 @@ def test_registration_without_import():
 def test_kernel_action_mapping_matches_documented_mapping():
     """The compiled env tick maps actions exactly as rolling_env.actions.to_controls documents."""
     from rolling_env.actions import from_controls, to_controls
+
     env = gym.make("RollingDrive-v0").unwrapped
     env.reset(seed=0)
     for a in np.random.default_rng(1).uniform(-0.2, 0.2, (20, 3)):
@@ -442,8 +499,9 @@ def test_denormal_rolling_action_right_after_reset(scene):
 def test_numpy_scalar_overrides_and_scene_types():
     """Overrides from numpy sweeps (np.float32, np.int64) are numbers like any other; a scene
     that is not a name, path, dict or Scene is a ValueError listing what is allowed."""
-    env = gym.make("RollingDrive-v0", mu=np.float32(0.25), sub_steps=np.int64(4),
-                   resolution=np.int64(8))
+    env = gym.make(
+        "RollingDrive-v0", mu=np.float32(0.25), sub_steps=np.int64(4), resolution=np.int64(8)
+    )
     sc = env.unwrapped.scene
     assert sc.mu == pytest.approx(0.25) and sc.sub_steps == 4 and type(sc.sub_steps) is int
     with pytest.raises(ValueError, match=r"'sub_steps' must be an integer in \[1, 100000\], got 0"):
@@ -475,17 +533,23 @@ def test_vanishing_runner_mass_tends_to_massless():
     assert scale > 0 and err <= 1e-9 * scale, f"x* differs by {err:.3g} m (scale {scale:.3g} m)"
 
 
-@pytest.mark.parametrize("options,match", [
-    ({"target": 1e-3}, r"options\['target'\] must be a finite displacement in "
-                       r"\[-5e-06, 5e-06\]"),
-    ({"target": 5.001e-6}, r"in \[-5e-06, 5e-06\] m .*got 5.001e-06"),
-    ({"target": True}, r"options\['target'\] must be a number"),
-    ({"target": 10**400}, r"options\['target'\] .* got an integer too large for a float"),
-    ({"target": float("nan")}, "finite displacement"),
-    ({"targte": 1e-7}, r"unknown key\(s\) \['targte'\]"),
-    ({"target": "3e-7"}, r"options\['target'\] must be a number"),
-    ([{"target": 1e-7}], "options must be a dict"),
-])
+@pytest.mark.parametrize(
+    "options,match",
+    [
+        (
+            {"target": 1e-3},
+            r"options\['target'\] must be a finite displacement in "
+            r"\[-5e-06, 5e-06\]",
+        ),
+        ({"target": 5.001e-6}, r"in \[-5e-06, 5e-06\] m .*got 5.001e-06"),
+        ({"target": True}, r"options\['target'\] must be a number"),
+        ({"target": 10**400}, r"options\['target'\] .* got an integer too large for a float"),
+        ({"target": float("nan")}, "finite displacement"),
+        ({"targte": 1e-7}, r"unknown key\(s\) \['targte'\]"),
+        ({"target": "3e-7"}, r"options\['target'\] must be a number"),
+        ([{"target": 1e-7}], "options must be a dict"),
+    ],
+)
 def test_reset_target_option_checked_before_anything_changes(options, match):
     """A target the error observation cannot show (beyond OBS_BOUND target_max it sits at its
     clip all episode), a boolean, a mistyped key: ValueError, and the env's generator is not
@@ -497,6 +561,7 @@ def test_reset_target_option_checked_before_anything_changes(options, match):
         env.reset(seed=2, options=options)
     assert env.unwrapped.np_random.bit_generator.state == state
     from types import MappingProxyType
+
     env.reset(options=MappingProxyType({"target": np.array(3e-7)}))  # any mapping, 0-d arrays
     assert env.unwrapped.target == 3e-7
     edge = -10 * env.unwrapped.scene.target_max  # OBS_BOUND x target_max: still allowed
@@ -522,8 +587,10 @@ def test_human_render_windows_are_per_env():
     """Two envs rendering to windows each get their own; closing one keeps the other's (they
     shared one module-level window)."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     plt.close("all")
     envs = [gym.make("RollingDrive-v0", render_mode="human") for _ in range(2)]
     for e in envs:
@@ -542,6 +609,7 @@ def test_seeded_targets_are_those_of_rng_choice():
     those of the first implementation, which drew the sign with rng.choice((-1.0, 1.0));
     sample_target draws the same integer without choice's conversion of the tuple."""
     from rolling_env.env import sample_target
+
     scene = load_scene("default")
     assert scene.target_both_signs
     for seed in range(300):
@@ -570,6 +638,7 @@ def test_overflow_of_a_light_loaded_runner_names_the_scene_keys():
     lifts off) overflows on its first step: the error says which keys make it do so, in the
     single and the batched env."""
     from rolling_env.vector import BatchCore
+
     kw = dict(runner_mass=1e-295, F_ext=1e6, period=1e3, ticks_per_period=2)
     env = gym.make("RollingDrive-v0", **kw)
     env.reset(seed=0)
@@ -587,6 +656,7 @@ def test_scene_inputs_beyond_the_float_range_and_suffix_case(tmp_path):
     a scene file whose suffix is upper case (.YAML) was taken for an unknown scene name; a
     0-d array override was refused while numpy scalars were taken."""
     from rolling_env.scenes import SCENE_DIR
+
     for key in ("episode_steps", "R"):
         with pytest.raises(ValueError, match=f"^scene key '{key}' must be"):
             rolling_env.make("default", **{key: 10**400})
@@ -620,6 +690,9 @@ def test_a_scene_that_cannot_be_built_names_its_keys():
     at 4096 cells per contact radius): the error names the scene and the keys behind the
     drive's arguments, not only 'the stroke' and 'a_ref'."""
     scene = load_scene("default", stroke_roll=0.5, resolution=4096.0)
-    with pytest.raises(ValueError, match=r"^scene 'default' cannot be built: .*cells.*"
-                                         r"stroke_roll = 0.5 m.*N_max.*resolution = 4096"):
+    with pytest.raises(
+        ValueError,
+        match=r"^scene 'default' cannot be built: .*cells.*"
+        r"stroke_roll = 0.5 m.*N_max.*resolution = 4096",
+    ):
         gym.make("RollingDrive-v0", scene=scene)

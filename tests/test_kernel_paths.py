@@ -2,6 +2,7 @@
 cells, ``_kernel._walk_content``) and ``Drive.run``'s (ledger on, ``_kernel._walk``) must give
 the same trajectories to round-off, and both the trajectories of the kernel before the
 2026-11-24 speed-ups (a recorded reference); the observation clock table of the env kernel."""
+
 from __future__ import annotations
 
 import math
@@ -50,8 +51,9 @@ def test_closed_form_edge_cell_matches_the_walk():
         scale_A = abs(U0[k]) + 1e-300
         scale_B = dx[k] * dt[k]
         err = max(abs(A1 - A2) / scale_A, abs(B1 - B2) / scale_B)
-        assert err <= 1e-12, (f"cell {k}: closed form ({A1!r}, {B1!r}) vs walk ({A2!r}, {B2!r}); "
-                              f"inputs {args}")
+        assert err <= 1e-12, (
+            f"cell {k}: closed form ({A1!r}, {B1!r}) vs walk ({A2!r}, {B2!r}); inputs {args}"
+        )
 
 
 def _boundary_cells(rng, n):
@@ -61,12 +63,19 @@ def _boundary_cells(rng, n):
     cases = []
     for _ in range(n):
         dx = 2.0 ** rng.integers(-6, 3)
-        pL = rng.integers(-64, 64) * 2.0 ** -6
+        pL = rng.integers(-64, 64) * 2.0**-6
         pR = pL + dx
         a = [dx / 2, dx * 2.0 ** rng.integers(-3, 6), dx * rng.uniform(0.5, 8)][rng.integers(3)]
         b = [pL - a, min(pR - a, pL + a), max(pR - a, pL + a), pR + a]
-        pts = b + [pL, pR, pL - 2 * a - dx, pR + 2 * a + dx, 0.5 * (b[0] + b[1]),
-                   0.5 * (b[2] + b[3]), 0.5 * (b[1] + b[2])]
+        pts = b + [
+            pL,
+            pR,
+            pL - 2 * a - dx,
+            pR + 2 * a + dx,
+            0.5 * (b[0] + b[1]),
+            0.5 * (b[2] + b[3]),
+            0.5 * (b[1] + b[2]),
+        ]
         p, pe = sorted((pts[rng.integers(len(pts))], pts[rng.integers(len(pts))]))
         if pe == p:
             pe = p + dx * rng.uniform(0, 3)
@@ -85,8 +94,9 @@ def test_closed_form_edge_cell_matches_the_walk_on_piece_boundaries():
         A2, B2 = K._walk(U0, xL, xR, c0, a, u, inv, dt)[:2]
         assert np.isfinite([A1, B1, A2, B2]).all(), (U0, xL, xR, c0, a, u, dt, A1, B1, A2, B2)
         err = max(abs(A1 - A2) / (abs(U0) + 1e-300), abs(B1 - B2) / ((xR - xL) * dt))
-        assert err <= 1e-12, (f"closed form ({A1!r}, {B1!r}) vs walk ({A2!r}, {B2!r}) at "
-                              f"{(U0, xL, xR, c0, a, u, dt)}")
+        assert err <= 1e-12, (
+            f"closed form ({A1!r}, {B1!r}) vs walk ({A2!r}, {B2!r}) at {(U0, xL, xR, c0, a, u, dt)}"
+        )
 
 
 def test_edge_limit_is_the_friction_limit_and_its_value_per_unit_overlap():
@@ -113,16 +123,18 @@ def test_edge_limit_is_the_friction_limit_and_its_value_per_unit_overlap():
         n_in += 1
         assert q >= 0.0 and Li >= 0.0, f"cell {k}: negative limit {Li} or q {q}"
         assert Li == pytest.approx(want, rel=1e-13, abs=1e-13 * muEG[k] * d[k] * ell), (
-            f"cell {k}: limit {Li}, from the normal content {want}")
+            f"cell {k}: limit {Li}, from the normal content {want}"
+        )
         assert q * ell == pytest.approx(Li, rel=1e-15, abs=1e-300), (
-            f"cell {k}: q * overlap = {q * ell}, limit {Li}")
+            f"cell {k}: q * overlap = {q * ell}, limit {Li}"
+        )
     assert n_in > 1000, f"only {n_in} of the random cells touch their contact"
 
 
 def test_closed_form_edge_cell_below_the_rounding_step_stays_finite():
     """A cell narrower than the rounding step of its coordinates (x + a gives the same float at
     both cell edges) leaves the contact with nothing, as in the walk, not with 0/0 = NaN."""
-    args = (0.5, 0.0, 1.0, 2.0 ** 60 - 1024, 2.0 ** 60, 1.0, 1.0, 2048.0)
+    args = (0.5, 0.0, 1.0, 2.0**60 - 1024, 2.0**60, 1.0, 1.0, 2048.0)
     assert K._walk_content(*args) == (0.0, 0.0) == K._walk(*args)[:2]
 
 
@@ -141,8 +153,7 @@ def _commit_reference(W, i0, i1, j0, j1, dxdt, s, inv_dx, mass):
         inner = j0 <= i <= j1
         Bi = dxdt if inner else W[K.W_B, i]
         Li = W[K.W_L + K.L_LIMIT, i]
-        q = ((Li - 0.5 * (DRIFT[0] + DRIFT[1] * i)) * inv_dx if inner
-             else W[K.W_L + K.L_QLIM, i])
+        q = (Li - 0.5 * (DRIFT[0] + DRIFT[1] * i)) * inv_dx if inner else W[K.W_L + K.L_QLIM, i]
         Ut = W[K.W_A, i] + Bi * s
         if abs(Ut) > Li:
             slip += (abs(Ut) - Li) * q
@@ -154,13 +165,16 @@ def _commit_reference(W, i0, i1, j0, j1, dxdt, s, inv_dx, mass):
 
 
 @pytest.mark.parametrize("mass", [None, 0.0, 2.5])
-@pytest.mark.parametrize("i0, i1, j0, j1", [
-    (0, 11, 3, 8),    # edge cells on both sides, the contact at the row's first and last cell
-    (0, 11, 0, 11),   # inner cells only
-    (2, 9, 10, 9),    # no inner cell (j0 = i1 + 1): every cell an edge cell
-    (5, 5, 6, 5),     # a single edge cell
-    (0, -1, 0, -1),   # no cell (lift-off, or the contact off the row): nothing committed
-])
+@pytest.mark.parametrize(
+    "i0, i1, j0, j1",
+    [
+        (0, 11, 3, 8),  # edge cells on both sides, the contact at the row's first and last cell
+        (0, 11, 0, 11),  # inner cells only
+        (2, 9, 10, 9),  # no inner cell (j0 = i1 + 1): every cell an edge cell
+        (5, 5, 6, 5),  # a single edge cell
+        (0, -1, 0, -1),  # no cell (lift-off, or the contact off the row): nothing committed
+    ],
+)
 def test_commit_of_every_cell_matches_a_plain_reference(i0, i1, j0, j1, mass):
     """``_commit`` with ``edges=True`` (the env's one loop over inner and edge cells) against a
     plain per-cell loop: contents exactly equal (the per-cell arithmetic is not reordered),
@@ -181,13 +195,14 @@ def test_commit_of_every_cell_matches_a_plain_reference(i0, i1, j0, j1, mass):
     dxdt, s, inv_dx = 0.4, 1.7, 2.0
     want_W, want = _commit_reference(W, i0, i1, j0, j1, dxdt, s, inv_dx, mass)
     got = K._commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, 0.2, mass, True, None, DRIFT)
-    np.testing.assert_array_equal(W[K.W_U], want_W[K.W_U],
-                                  err_msg="committed contents differ from the plain loop")
+    np.testing.assert_array_equal(
+        W[K.W_U], want_W[K.W_U], err_msg="committed contents differ from the plain loop"
+    )
     np.testing.assert_array_equal(W[1:], want_W[1:], err_msg="commit changed a row it only reads")
     assert got[3:] == (0, 0, 0.0), f"census counts {got[3:]} without a census"
     for name, g, w in zip(("T1", "Ta", "slip"), got[:3], want):
         assert g == pytest.approx(w, rel=1e-13, abs=1e-300), f"{name} = {g}, plain loop {w}"
-    U, L = want_W[K.W_U, i0:i1 + 1], want_W[K.W_L + K.L_LIMIT, i0:i1 + 1]
+    U, L = want_W[K.W_U, i0 : i1 + 1], want_W[K.W_L + K.L_LIMIT, i0 : i1 + 1]
     n_pos = int(np.sum((U == L) & (L > 0)))  # slid to +limit
     n_neg = int(np.sum((U == -L) & (L > 0)))  # slid to -limit
     if i1 >= i0:  # the case must exercise the slip path (else it could pass with it broken)
@@ -212,23 +227,27 @@ def test_commit_keeps_a_nan_content(edges, where):
     W[K.W_A] = 2.0  # every other cell beyond its limit: the clip is exercised
     W[K.W_A, where] = np.nan
     j0, j1 = (3, 8) if edges else (0, n - 1)
-    T1, Ta, _slip, _ns, _nk, _nh = K._commit(W, 0, n - 1, j0, j1, 0.4, 0.3, 2.0, 0.2, 1.0,
-                                             edges, None, DRIFT)
+    T1, Ta, _slip, _ns, _nk, _nh = K._commit(
+        W, 0, n - 1, j0, j1, 0.4, 0.3, 2.0, 0.2, 1.0, edges, None, DRIFT
+    )
     assert math.isnan(W[K.W_U, where]), f"cell {where} committed {W[K.W_U, where]}, not NaN"
     assert math.isnan(T1) and math.isnan(Ta), f"T1 = {T1}, Ta = {Ta}: the NaN was lost"
     others = np.delete(W[K.W_U], where)
     np.testing.assert_array_equal(others, 1.0, err_msg="the other cells not clipped to +1")
 
 
-@pytest.mark.parametrize("a,b,L0,L1", [
-    (0.9, -5.0, 1.0, 0.8),    # a creep reversal: from +limit across to -limit early on
-    (1.0, 3.0, 1.0, 0.6),     # sliding at a falling limit all through
-    (0.2, 0.5, 1.0, 1.2),     # inside all through (no clip)
-    (-0.5, 4.0, 0.7, 0.7),    # constant limit, stuck then sliding
-    (2.0, 2.0, 1.0, 0.5),     # no motion, beyond both limits (clip at the limit)
-    (-3.0, 0.1, 1.0, 0.0),    # to a limit of 0 (leaving the contact)
-    (0.0, 1e-300, 0.0, 0.0),  # out of contact
-])
+@pytest.mark.parametrize(
+    "a,b,L0,L1",
+    [
+        (0.9, -5.0, 1.0, 0.8),  # a creep reversal: from +limit across to -limit early on
+        (1.0, 3.0, 1.0, 0.6),  # sliding at a falling limit all through
+        (0.2, 0.5, 1.0, 1.2),  # inside all through (no clip)
+        (-0.5, 4.0, 0.7, 0.7),  # constant limit, stuck then sliding
+        (2.0, 2.0, 1.0, 0.5),  # no motion, beyond both limits (clip at the limit)
+        (-3.0, 0.1, 1.0, 0.0),  # to a limit of 0 (leaving the contact)
+        (0.0, 1e-300, 0.0, 0.0),  # out of contact
+    ],
+)
 def test_clip_path_is_the_exact_mean_of_the_clipped_straight_path(a, b, L0, L1):
     """``_clip_path`` (the ledger's impulse of a cell that slid) against a fine midpoint sum of
     clip(a + (b - a) t, -L(t), L(t)) with L linear from L0 to L1 (2e5 points: its error is
@@ -247,7 +266,8 @@ def test_commit_census_counts_the_cells_that_slid_and_those_whose_path_bends():
     creep reversal, or a stuck cell that starts to slide), and the signed count (+1 at +L,
     -1 at -L) of those that slid, against a plain count; the commit itself is the one
     without the census.  ``_impulse_fix`` returns the signed count of the bent ones, so that
-    the difference counts the cells held at their limit.  Start limit = end limit - (alpha + beta i);
+    the difference counts the cells held at their limit.  Start limit = end limit - (alpha +
+    beta i);
     here alpha = 0.05, beta = 0.01."""
     n = 12
     W = np.zeros((K.work_rows(True), n))
@@ -256,15 +276,30 @@ def test_commit_census_counts_the_cells_that_slid_and_those_whose_path_bends():
     L0 = L1 - (0.05 + 0.01 * np.arange(n))
     # starts: at the start limit (stays there), inside (starts to slide), at the other limit
     # (reversal), and cells that end inside (no slide)
-    W[K.W_A] = [L0[0], -L0[1], 0.2, L0[3], -0.3, L0[5], 0.5 * L0[6], -L0[7], L0[8], 0.0,
-                L0[10], -L0[11]]
+    W[K.W_A] = [
+        L0[0],
+        -L0[1],
+        0.2,
+        L0[3],
+        -0.3,
+        L0[5],
+        0.5 * L0[6],
+        -L0[7],
+        L0[8],
+        0.0,
+        L0[10],
+        -L0[11],
+    ]
     dxdt, s = 0.4, np.array([3.0, -3.0, 3.0, -6.0, -4.0, 0.1, 2.0, -1.0, 5.0, 0.5, -8.0, 2.0])
     b = W[K.W_A] + dxdt * s  # unclipped ends (the kernel takes one creep s per call)
     slid = np.abs(b) > L1
     bends = slid & ~((W[K.W_A] * b > 0) & (np.abs(W[K.W_A]) >= L0 * (1 - 1e-9)))
     held = np.where(slid & ~bends, np.sign(b), 0.0)
     assert slid.sum() >= 6 and bends.sum() >= 3 and (held > 0).any() and (held < 0).any(), (
-        slid, bends, held)
+        slid,
+        bends,
+        held,
+    )
     # several cells in one call (one creep): every cell of both signs, the packed count
     Wn = W.copy()
     got = K._commit(Wn, 0, n - 1, 0, n - 1, dxdt, 3.0, 2.0, 0.2, None, None, True, DRIFT)
@@ -305,10 +340,11 @@ def test_ledger_impulse_is_accurate_at_creep_reversals():
     to 1e-12 (unaffected), and the residual / drive work in [0, 1e-3] at 40 sub-steps
     (measured +7.9e-5: dissipated, not created)."""
     from rolling_env.model import Drive, DriveParams
+
     R, E, a1, tau = 1e-3, 115e9, 2e-5, 1e-3
     rng = np.random.default_rng(11)
     k = 24
-    d = a1 ** 2 / R * rng.uniform(0.2, 1.0, k)
+    d = a1**2 / R * rng.uniform(0.2, 1.0, k)
     u = (5 * a1 / tau) * rng.choice([-1.0, 1.0], k) * rng.uniform(0.3, 1.0, k)
     d[[5, 13]] = 0.0  # lift-offs
     u[[8, 17]] = 0.0
@@ -319,8 +355,14 @@ def test_ledger_impulse_is_accurate_at_creep_reversals():
     assert np.any(np.diff(np.sign(u - v - vs)) != 0), "no creep reversal in the case"
 
     def run(n_sub):
-        drv = Drive(DriveParams(R, E, 0.8235 * E, mu=0.02), a_ref=a1, resolution=64,
-                    stroke=(-reach, reach), a_max=a1, t_ref=tau)
+        drv = Drive(
+            DriveParams(R, E, 0.8235 * E, mu=0.02),
+            a_ref=a1,
+            resolution=64,
+            stroke=(-reach, reach),
+            a_max=a1,
+            t_ref=tau,
+        )
         drv.reset()
         out = drv.run(dt_tick=dt, n_sub=n_sub, omega_R=u, v=v, d=d, vstar=vs)
         return out, drv.energy
@@ -329,8 +371,13 @@ def test_ledger_impulse_is_accurate_at_creep_reversals():
     scale = np.max(np.abs(fine["impulse"]))
     err = np.max(np.abs(coarse["impulse"] - fine["impulse"])) / scale
     assert err < 1e-4, f"per-tick impulse off by {err:.2e} of the largest at 40 sub-steps"
-    np.testing.assert_allclose(coarse["T"], fine["T"], rtol=0, atol=1e-12 * np.max(
-        np.abs(fine["T"])), err_msg="T itself changed")
+    np.testing.assert_allclose(
+        coarse["T"],
+        fine["T"],
+        rtol=0,
+        atol=1e-12 * np.max(np.abs(fine["T"])),
+        err_msg="T itself changed",
+    )
     res = e["residual"] / e["drive"]
     assert 0.0 <= res < 1e-3, f"energy residual / drive work {res:.2e} at 40 sub-steps"
 
@@ -344,18 +391,32 @@ def test_ledger_impulse_in_steady_partial_slip(mu, bounds):
     cell takes its own integral (``_edge_impulse``: exact where it sticks or slides all through) and
     the inner cells at their limit the curvature term: with the inner cells corrected alone
     (fd98fb5) this measured 6.9e-4 / 4.3e-5 and 2.6e-3 / 1.9e-4, the trapezoid on T alone
-    8.3e-5 / 6.1e-6 and 6.9e-5 / 4.0e-6 (docs/physics.md, "Impulse and work with finite friction")."""
+    8.3e-5 / 6.1e-6 and 6.9e-5 / 4.0e-6 (docs/physics.md, "Impulse and work with finite
+    friction")."""
     from rolling_env.model import Drive, DriveParams
+
     R, E, a1, tau = 1e-3, 115e9, 2e-5, 1e-3
     k, u, dt = 6, 5 * a1 / tau, tau / 8
     reach = 1.1 * u * dt * k
 
     def impulse(n_sub):
-        drv = Drive(DriveParams(R, E, 0.8235 * E, mu=mu), a_ref=a1, resolution=64,
-                    stroke=(-reach, reach), a_max=a1, t_ref=tau)
+        drv = Drive(
+            DriveParams(R, E, 0.8235 * E, mu=mu),
+            a_ref=a1,
+            resolution=64,
+            stroke=(-reach, reach),
+            a_max=a1,
+            t_ref=tau,
+        )
         drv.reset()
-        return drv.run(dt_tick=dt, n_sub=n_sub, omega_R=np.full(k, u), v=np.full(k, 0.999 * u),
-                       d=np.full(k, a1 ** 2 / R), vstar=np.zeros(k))["impulse"]
+        return drv.run(
+            dt_tick=dt,
+            n_sub=n_sub,
+            omega_R=np.full(k, u),
+            v=np.full(k, 0.999 * u),
+            d=np.full(k, a1**2 / R),
+            vstar=np.zeros(k),
+        )["impulse"]
 
     ref = impulse(4096)
     err = {n: np.max(np.abs(impulse(n) - ref)) / np.max(np.abs(ref)) for n in (16, 64)}
@@ -371,29 +432,45 @@ def test_ledger_impulse_in_steady_full_sliding_is_exact():
     trapezoid with the curvature term (without it this fails; the trapezoid on T alone,
     before the per-cell ledger, was exact here too, T being constant)."""
     from rolling_env.model import Drive, DriveParams
+
     R, E, a1, tau, mu = 1e-3, 115e9, 2e-5, 1e-3, 0.2
     k, u, dt = 6, 5 * a1 / tau, tau / 8
     reach = 1.1 * u * dt * k
-    drv = Drive(DriveParams(R, E, 0.8235 * E, mu=mu), a_ref=a1, resolution=64,
-                stroke=(-reach, reach), a_max=a1, t_ref=tau)
+    drv = Drive(
+        DriveParams(R, E, 0.8235 * E, mu=mu),
+        a_ref=a1,
+        resolution=64,
+        stroke=(-reach, reach),
+        a_max=a1,
+        t_ref=tau,
+    )
     drv.reset()
-    out = drv.run(dt_tick=dt, n_sub=8, omega_R=np.full(k, u), v=np.full(k, 0.9 * u),
-                  d=np.full(k, a1 ** 2 / R), vstar=np.zeros(k))
+    out = drv.run(
+        dt_tick=dt,
+        n_sub=8,
+        omega_R=np.full(k, u),
+        v=np.full(k, 0.9 * u),
+        d=np.full(k, a1**2 / R),
+        vstar=np.zeros(k),
+    )
     muN = mu * out["N"][-1]
     assert np.allclose(np.abs(out["T"][1:]), muN, rtol=1e-9, atol=0), "not fully sliding"
     err = np.max(np.abs(np.abs(out["impulse"][1:]) - muN * dt)) / (muN * dt)
     assert err < 1e-12, f"impulse off by {err:.1e} of mu N dt in steady full sliding"
 
 
-@pytest.mark.parametrize("xL,xR,c0,h", [
-    (-0.3, -0.2, 0.0, 0.05),     # inside the contact all through
-    (0.9, 1.0, 0.0, 0.06),       # entering: the leading edge (c + a) crosses the cell
-    (-1.05, -0.95, 0.0, 0.08),   # leaving at the trailing edge
-    (-1.02, -0.98, 0.0, -0.07),  # rolling backwards over the edge
-    (-0.5, 2.0, 0.0, 0.3),       # a cell wider than the contact's half-width
-    (1.5, 1.6, 0.0, 0.1),        # never in contact
-    (0.95, 1.05, 0.0, 3e-7),     # a patch that hardly moves (the midpoint rule)
-])
+@pytest.mark.parametrize(
+    "xL,xR,c0,h",
+    [
+        (-0.3, -0.2, 0.0, 0.05),  # inside the contact all through
+        (0.9, 1.0, 0.0, 0.06),  # entering: the leading edge (c + a) crosses the cell
+        (-1.05, -0.95, 0.0, 0.08),  # leaving at the trailing edge
+        (-1.02, -0.98, 0.0, -0.07),  # rolling backwards over the edge
+        (-0.5, 2.0, 0.0, 0.3),  # a cell wider than the contact's half-width
+        (1.5, 1.6, 0.0, 0.1),  # never in contact
+        (0.95, 1.05, 0.0, 3e-7),  # a patch that hardly moves (the midpoint rule)
+    ],
+)
 def test_limit_integral_is_exact(xL, xR, c0, h):
     """``_limit_integral`` (the time integral of a cell's friction limit while the patch moves
     by h in a sub-step) against a fine midpoint sum of ``_edge_limit``: within 1e-9 of the
@@ -421,8 +498,7 @@ def test_kernels_compile_without_reference_counting():
 @njit
 def _run(W, st, p, d, u, v, mu, mass, load, n_sub, dt, outs, ledger):
     for k in range(d.shape[0]):
-        K._tick(W, st, p, d[k], u[k], v[k], 0.0, mu, mass, load, n_sub, dt, outs[k],
-                ledger)
+        K._tick(W, st, p, d[k], u[k], v[k], 0.0, mu, mass, load, n_sub, dt, outs[k], ledger)
 
 
 def _inputs(core, ticks, seed):
@@ -454,21 +530,28 @@ def test_env_path_matches_the_ledger_path(scene):
     outs = {}
     for ledger in (True, None):
         W = np.zeros((K.work_rows(mu is not None, ledger is not None), core.cells.shape[2]))
-        W[:core.cells.shape[1]] = core.cells[0, :W.shape[0]]  # the env's rows lack the ledger's
+        W[: core.cells.shape[1]] = core.cells[0, : W.shape[0]]  # the env's rows lack the ledger's
         st = core.st[0].copy()
         out = np.zeros((d.size, K.N_OUT))
         _run(W, st, core.p[0], d, u, v, mu, mass, load, n_sub, dt, out, ledger)
         assert st[K.ST_FLAG] == 0, f"{scene}: flags {st[K.ST_FLAG]} (contact left the row?)"
         outs[ledger] = out
     ref, env = outs[True], outs[None]
-    for col, name in [(K.OUT_T, "T"), (K.OUT_VS, "v*"), (K.OUT_XS, "x*"),
-                      (K.OUT_SLIP, "slip work"), (K.OUT_C, "c"), (K.OUT_N, "N")]:
+    for col, name in [
+        (K.OUT_T, "T"),
+        (K.OUT_VS, "v*"),
+        (K.OUT_XS, "x*"),
+        (K.OUT_SLIP, "slip work"),
+        (K.OUT_C, "c"),
+        (K.OUT_N, "N"),
+    ]:
         scale = np.abs(ref[:, col]).max() + 1e-300
         err = np.abs(env[:, col] - ref[:, col]).max() / scale
         assert err <= 1e-11, f"{scene}: {name} differs by {err:.1e} of its largest value"
     stick = np.abs(env[:, K.OUT_STICK] - ref[:, K.OUT_STICK])
     assert stick.max() <= 0.2 and stick.mean() <= 1e-3, (
-        f"{scene}: stuck fraction differs by up to {stick.max():.3f}, mean {stick.mean():.1e}")
+        f"{scene}: stuck fraction differs by up to {stick.max():.3f}, mean {stick.mean():.1e}"
+    )
 
 
 @pytest.mark.parametrize("mu", [0.3, None])
@@ -480,10 +563,10 @@ def test_load_drop_without_the_ledger_leaves_only_the_ledger_out(mu):
     n = 40
     p = np.array([50.0, 1.2, -10.0, 0.5])  # R, E*/G*, x_lo, dx
     a_old, a_new = 3.0, 2.0
-    d_old, d_new = a_old ** 2 / p[K.P_R], a_new ** 2 / p[K.P_R]
+    d_old, d_new = a_old**2 / p[K.P_R], a_new**2 / p[K.P_R]
     base = np.zeros((K.work_rows(mu is not None), n))
     i0, i1 = K._contact_range(0.1, a_old, p[K.P_X_LO], p[K.P_DX], n)
-    base[K.W_U, i0:i1 + 1] = np.linspace(-0.2, 0.3, i1 - i0 + 1)
+    base[K.W_U, i0 : i1 + 1] = np.linspace(-0.2, 0.3, i1 - i0 + 1)
     res = {}
     for ledger in (True, None):
         W = base.copy()
@@ -498,7 +581,8 @@ def test_load_drop_without_the_ledger_leaves_only_the_ledger_out(mu):
     assert st1[K.ST_REL] > 0.0, "the ledger recorded no released energy on the drop"
     if mu is not None:
         assert slip1 > 0.0 and st1[K.ST_SNAP] > 0.0, (
-            f"no slip ({slip1}) or snap ({st1[K.ST_SNAP]}): the case does not exceed the limits")
+            f"no slip ({slip1}) or snap ({st1[K.ST_SNAP]}): the case does not exceed the limits"
+        )
     assert st0[K.ST_REL] == 0.0 and st0[K.ST_SNAP] == 0.0, "the env path wrote ledger energies"
 
 
@@ -506,8 +590,9 @@ def test_load_drop_without_the_ledger_leaves_only_the_ledger_out(mu):
 def test_observation_clock_is_the_excitation_phase(ticks_per_period):
     """Observations 7 and 8 are sin and cos of 2 pi t / period at every step (read from a
     table of one period), to float32 precision, over two and a half periods."""
-    env = rolling_env.make("default", ticks_per_period=ticks_per_period,
-                           episode_steps=5 * ticks_per_period // 2 + 3)
+    env = rolling_env.make(
+        "default", ticks_per_period=ticks_per_period, episode_steps=5 * ticks_per_period // 2 + 3
+    )
     obs, _ = env.reset(seed=0)
     steps = 5 * ticks_per_period // 2
     zero = np.zeros(3, dtype=np.float32)
@@ -515,7 +600,8 @@ def test_observation_clock_is_the_excitation_phase(ticks_per_period):
         obs, *_ = env.step(zero)
         ph = 2 * math.pi * k / ticks_per_period
         assert abs(obs[7] - math.sin(ph)) <= 1e-6 and abs(obs[8] - math.cos(ph)) <= 1e-6, (
-            f"step {k}: clock ({obs[7]}, {obs[8]}), expected ({math.sin(ph)}, {math.cos(ph)})")
+            f"step {k}: clock ({obs[7]}, {obs[8]}), expected ({math.sin(ph)}, {math.cos(ph)})"
+        )
 
 
 def test_scene_vector_carries_one_period_of_the_clock():
@@ -550,13 +636,15 @@ def test_no_content_outside_the_contact(scene, resolution):
         for e in range(32):
             c, half = core.st[e, K.ST_C], core.st[e, K.ST_A]
             lv = int(core.st[e, K.ST_LEVEL])  # the level grid's cells in use
-            dx, n = core.p[e, K.P_DX] / 2 ** lv, n_all >> (levels - lv)
+            dx, n = core.p[e, K.P_DX] / 2**lv, n_all >> (levels - lv)
             U = core.cells[e, K.W_U]
             i0, i1 = K._contact_range(c, half, x_lo, dx, n) if half > 0 else (n, -1)
-            outside = np.r_[U[:i0], U[i1 + 1:]]  # the finer levels' cells beyond n too
-            assert not np.any(outside), (f"tick {t}, env {e}: content {outside[outside != 0]!r} "
-                                         f"outside the contact cells {i0}..{i1} (c = {c!r}, "
-                                         f"a = {half!r}, dx = {dx!r})")
+            outside = np.r_[U[:i0], U[i1 + 1 :]]  # the finer levels' cells beyond n too
+            assert not np.any(outside), (
+                f"tick {t}, env {e}: content {outside[outside != 0]!r} "
+                f"outside the contact cells {i0}..{i1} (c = {c!r}, "
+                f"a = {half!r}, dx = {dx!r})"
+            )
 
 
 def _ulp_contact_ends():
@@ -600,24 +688,30 @@ def test_cells_a_tick_touches_are_the_cells_of_the_contact_at_ulp_level():
         K._tick(W, st, p, d, 0.0, 0.1, 0.0, None, 1.0, None, 1, 0.01, out, None)
         i0, i1 = K._contact_range(st[K.ST_C], st[K.ST_A], x_lo, dx, n)
         U = W[K.W_U]
-        outside = np.r_[U[:i0], U[i1 + 1:]]
-        assert not np.any(outside), (f"x_lo = {x_lo!r}, dx = {dx!r}, contact end {t!r}: content "
-                                     f"{outside[outside != 0]!r} outside cells {i0}..{i1}")
+        outside = np.r_[U[:i0], U[i1 + 1 :]]
+        assert not np.any(outside), (
+            f"x_lo = {x_lo!r}, dx = {dx!r}, contact end {t!r}: content "
+            f"{outside[outside != 0]!r} outside cells {i0}..{i1}"
+        )
         q = math.floor((t - x_lo) / dx)
         crossing += bool(U[q + 1] != 0.0) if q + 1 < n else 0
-    assert crossing >= 5, (f"only {crossing} of {len(cases)} cases put content in the cell the "
-                           "quotient would miss: the test no longer probes the ulp case")
+    assert crossing >= 5, (
+        f"only {crossing} of {len(cases)} cases put content in the cell the "
+        "quotient would miss: the test no longer probes the ulp case"
+    )
 
 
 def _exact_inner(i0, i1, full_lo, full_hi, x_lo, dx):
     """Cells of i0..i1 inside [full_lo, full_hi] by the cell bounds as the kernel computes them
     (x_lo + j dx and that plus dx), one by one."""
-    return [j for j in range(i0, i1 + 1)
-            if x_lo + j * dx >= full_lo and x_lo + j * dx + dx <= full_hi]
+    return [
+        j for j in range(i0, i1 + 1) if x_lo + j * dx >= full_lo and x_lo + j * dx + dx <= full_hi
+    ]
 
 
-@pytest.mark.parametrize("x_lo,n", [(-8.0, 400), (-3.7e3, 100_000), (-1.9e6, 20_000_000),
-                                    (2.5, 400)])
+@pytest.mark.parametrize(
+    "x_lo,n", [(-8.0, 400), (-3.7e3, 100_000), (-1.9e6, 20_000_000), (2.5, 400)]
+)
 def test_inner_cells_are_never_outside_and_exact_but_within_the_margin(x_lo, n):
     """``_inner_range`` estimates the inner cells with a margin instead of testing the cell
     bounds (2-3% of the env step): it must never call a cell inner that is not inside the
@@ -636,8 +730,9 @@ def test_inner_cells_are_never_outside_and_exact_but_within_the_margin(x_lo, n):
         # the margin costs speed, not accuracy: a margin of a sizeable fraction of a cell
         # would pass every check below, so it is bounded here
         assert tol < 1e-4, f"margin {tol:.1e} cells"
-        ends = [int(m) for m in np.r_[rng.integers(1, min(n, 300), 40),
-                                      rng.integers(1, n - 50, 40)]]
+        ends = [
+            int(m) for m in np.r_[rng.integers(1, min(n, 300), 40), rng.integers(1, n - 50, 40)]
+        ]
         ends += [n - 45 + k for k in range(6)]  # contacts reaching the row's end: i1 clamped
         for m in ends:
             for k_lo, k_hi in [(0, 0), (1, -1), (-1, 1), (3, -2), (-4, 4), (2, 2), (-2, -3)]:
@@ -661,16 +756,21 @@ def test_inner_cells_are_never_outside_and_exact_but_within_the_margin(x_lo, n):
                 got = list(range(j0, j1 + 1))
                 want = _exact_inner(i0, i1, full_lo, full_hi, xl, dx)
                 n_cases += 1
-                near = min(abs((full_lo - xl) * inv_dx - round((full_lo - xl) * inv_dx)),
-                           abs((full_hi - xl) * inv_dx - round((full_hi - xl) * inv_dx)))
+                near = min(
+                    abs((full_lo - xl) * inv_dx - round((full_lo - xl) * inv_dx)),
+                    abs((full_hi - xl) * inv_dx - round((full_hi - xl) * inv_dx)),
+                )
                 n_near += near <= tol
                 assert set(got) <= set(want), (
                     f"dx = {dx!r}, x_lo = {xl!r}: cells {sorted(set(got) - set(want))} called "
-                    f"inner outside [{full_lo!r}, {full_hi!r}]")
+                    f"inner outside [{full_lo!r}, {full_hi!r}]"
+                )
                 if got != want:
-                    assert near <= 2 * tol, (f"dx = {dx!r}: cells {got[:1]}..{got[-1:]} for "
-                                             f"{want[:1]}..{want[-1:]}, ends {near:.1e} cells "
-                                             f"from a bound (margin {tol:.1e})")
+                    assert near <= 2 * tol, (
+                        f"dx = {dx!r}: cells {got[:1]}..{got[-1:]} for "
+                        f"{want[:1]}..{want[-1:]}, ends {near:.1e} cells "
+                        f"from a bound (margin {tol:.1e})"
+                    )
     assert n_cases > 2000, n_cases
     assert n_near > 100, f"{n_near} ends within the margin: the test no longer probes it"
 
@@ -684,6 +784,7 @@ def test_env_reproduces_its_recorded_transitions(scene):
     (tests/make_golden.py; a speed-up must change it by round-off only): observations to 2e-6
     (float32), rewards and every info value to 1e-10 of their largest magnitude."""
     import make_golden
+
     ref = np.load(GOLDEN)
     new = make_golden.record(scene)
     keys = {k.split("/", 1)[1] for k in ref.files if k.startswith(scene + "/")}
@@ -711,6 +812,7 @@ def test_env_drive_refuses_drive_run_and_old_pickles_load():
     import rolling_env
     from rolling_env.model import Drive
     from rolling_env.vector import BatchCore
+
     env = rolling_env.make("default")
     drv = env.unwrapped.drive
     assert not drv.ledger
@@ -722,17 +824,31 @@ def test_env_drive_refuses_drive_run_and_old_pickles_load():
     assert np.any(drv.U != 0.0), "no contact after a step"
     with pytest.raises(RuntimeError, match="without the energy ledger"):
         drv.run(dt_tick=1e-6, n_sub=4, omega_R=[0.1], v=[0.1], N=[0.5])
-    W, st, p = drv.cells[:K.W_L + 2].copy(), drv.st.copy(), drv._p
+    W, st, p = drv.cells[: K.W_L + 2].copy(), drv.st.copy(), drv._p
     with pytest.raises(ValueError, match="lacks the energy ledger's rows"):  # not past the rows
-        K.run_ticks(W, st, p, np.array([0.1]), np.array([0.1]), np.array([0.1]), np.zeros(1),
-                    0.3, 1.0, None, 4, 0.01, np.zeros((1, K.N_OUT)))
-    own = Drive(drv.params, a_ref=drv.L0, resolution=8, stroke=(-1e-4, 1e-4), a_max=drv.L0,
-                t_ref=drv.t0)
+        K.run_ticks(
+            W,
+            st,
+            p,
+            np.array([0.1]),
+            np.array([0.1]),
+            np.array([0.1]),
+            np.zeros(1),
+            0.3,
+            1.0,
+            None,
+            4,
+            0.01,
+            np.zeros((1, K.N_OUT)),
+        )
+    own = Drive(
+        drv.params, a_ref=drv.L0, resolution=8, stroke=(-1e-4, 1e-4), a_max=drv.L0, t_ref=drv.t0
+    )
     assert own.ledger and own.cells.shape[0] == K.work_rows(True)
     own.U[:] = np.linspace(0.0, 1.0, own.U.size)
     state = pickle.loads(pickle.dumps(own)).__dict__.copy()  # as pickled before: a plain
-    state["ledger"] = state.pop("_ledger")                  # attribute, fewer rows
-    state["cells"] = state["cells"][:K.W_L + 2]
+    state["ledger"] = state.pop("_ledger")  # attribute, fewer rows
+    state["cells"] = state["cells"][: K.W_L + 2]
     older = Drive.__new__(Drive)
     older.__setstate__(state)
     assert older.ledger and older.cells.shape[0] == K.work_rows(True), older.cells.shape
@@ -765,8 +881,7 @@ def test_edge_impulse_of_a_cell_entering_stuck_that_starts_to_slide(over):
     A, B, IA, IB, *_ = K._walk(0.0, xL, xR, c0, a, u, K._inv_speed(u), dt)
     Li = K._edge_limit(xL, xR, c0 + u * dt, a, d, inv3R, muEG)[0]
     s = over * Li / B
-    got = K._edge_impulse(0.0, A + B * s, Li, IA + IB * s, s, xL, xR, c0, u, dt, a, d, inv3R,
-                          muEG)
+    got = K._edge_impulse(0.0, A + B * s, Li, IA + IB * s, s, xL, xR, c0, u, dt, a, d, inv3R, muEG)
     ref = _clipped_walk_integral(0.0, s, xL, xR, c0, u, dt, a, d, inv3R, muEG)
     assert abs(got - ref) <= 3e-4 * Li * dt, f"{(got - ref) / (Li * dt):.2e} of Li dt"
 
@@ -782,7 +897,7 @@ def test_runner_step_functions_against_high_precision(th2):
         want = [1, 1, mp.mpf(1) / 2, mp.mpf(1) / 6]
     else:
         t = mp.sqrt(th2)
-        want = [mp.cos(t), mp.sin(t) / t, (1 - mp.cos(t)) / t ** 2, (t - mp.sin(t)) / t ** 3]
+        want = [mp.cos(t), mp.sin(t) / t, (1 - mp.cos(t)) / t**2, (t - mp.sin(t)) / t**3]
     for name, g, w in zip(("cos", "p1", "p2", "p3"), got, want):
         assert abs(g - float(w)) <= 1e-14 * max(abs(float(w)), 1e-300) + 1e-300, (name, g, w)
 
@@ -793,9 +908,15 @@ def test_runner_linear_solves_the_forced_oscillator(k):
     integrated by scipy (rtol 1e-12): mean velocity xi(dt)/dt, end velocity and end force
     T + F to 1e-9 of their scales, from a free mass (k = 0) to 6 rad per step."""
     from scipy.integrate import solve_ivp
+
     m, T0, Tf1, F, v0, dt = 1.1, 0.7, -0.4, 0.25, 0.3, 1.0
-    sol = solve_ivp(lambda t, y: [y[1], (T0 + (Tf1 - T0) * t / dt - k * y[0] + F) / m],
-                    (0.0, dt), [0.0, v0], rtol=1e-12, atol=1e-14)
+    sol = solve_ivp(
+        lambda t, y: [y[1], (T0 + (Tf1 - T0) * t / dt - k * y[0] + F) / m],
+        (0.0, dt),
+        [0.0, v0],
+        rtol=1e-12,
+        atol=1e-14,
+    )
     xi, v1 = sol.y[0, -1], sol.y[1, -1]
     vb, v1k, f1 = K._runner_linear(m, k, T0, Tf1, F, v0, dt)
     assert abs(vb - xi / dt) < 1e-9 and abs(v1k - v1) < 1e-9, (vb, xi / dt, v1k, v1)

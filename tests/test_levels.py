@@ -7,6 +7,7 @@ the cells (up to ``grid_levels`` times) as the contact shrinks and merges them b
 These tests check the remaps from their definition (conservation, exactness on a linear
 profile, the choice of level) and the benefit against refined runs of the same episode.
 """
+
 from __future__ import annotations
 
 import math
@@ -25,8 +26,16 @@ A_MAX = 1.87e-5
 
 def _drive(levels: int, resolution: float = 16.0, ledger: bool = False) -> Drive:
     params = DriveParams(R, 115.4e9, 95.0e9, mu=math.inf, m=math.inf)
-    return Drive(params, a_ref=A_MAX, resolution=resolution, stroke=(-3 * A_MAX, 3 * A_MAX),
-                 a_max=A_MAX, t_ref=5e-5, ledger=ledger, levels=levels)
+    return Drive(
+        params,
+        a_ref=A_MAX,
+        resolution=resolution,
+        stroke=(-3 * A_MAX, 3 * A_MAX),
+        a_max=A_MAX,
+        t_ref=5e-5,
+        ledger=ledger,
+        levels=levels,
+    )
 
 
 def _overlaps(drv: Drive, level: int) -> tuple[np.ndarray, np.ndarray]:
@@ -71,10 +80,15 @@ def test_split_and_merge_conserve_content_and_round_trip():
     assert drv.st[K.ST_LEVEL] == 2
     assert abs(drv.U.sum() - U0.sum()) < 1e-13 * np.abs(U0).sum(), "split changed the content"
     _, ell2 = _overlaps(drv, 2)
-    assert np.all(drv.U[:n0 << 2][ell2 == 0] == 0.0), "content outside the contact"
+    assert np.all(drv.U[: n0 << 2][ell2 == 0] == 0.0), "content outside the contact"
     K._regrid(drv.cells, drv.st, drv._p, 0, None)
-    np.testing.assert_allclose(drv.U[:n0], U0, rtol=0, atol=1e-13 * np.abs(U0).max(),
-                               err_msg="split then merge is not the identity")
+    np.testing.assert_allclose(
+        drv.U[:n0],
+        U0,
+        rtol=0,
+        atol=1e-13 * np.abs(U0).max(),
+        err_msg="split then merge is not the identity",
+    )
     assert np.all(drv.U[n0:] == 0.0), "the merge left content in the finer cells"
 
 
@@ -83,15 +97,20 @@ def test_split_is_exact_on_a_linear_deflection():
     reconstruction: on uT = alpha + beta x the children get the exact integrals (1e-12)."""
     drv = _drive(levels=2)
     _contact(drv, c=-0.21, a=0.77)
-    drv.U[:drv.grid.n] = _linear_contents(drv, 0, 0.3, -1.7)
+    drv.U[: drv.grid.n] = _linear_contents(drv, 0, 0.3, -1.7)
     K._regrid(drv.cells, drv.st, drv._p, 2, None)
     exact = _linear_contents(drv, 2, 0.3, -1.7)
     _, ell = _overlaps(drv, 2)
     dx2 = drv.grid.dx / 4
     # children of parents two or more cells inside the contact's ends
     inner = np.flatnonzero(ell >= dx2)[8:-8]
-    np.testing.assert_allclose(drv.U[inner], exact[inner], rtol=0, atol=1e-12 * dx2,
-                               err_msg="a linear deflection is not split exactly")
+    np.testing.assert_allclose(
+        drv.U[inner],
+        exact[inner],
+        rtol=0,
+        atol=1e-12 * dx2,
+        err_msg="a linear deflection is not split exactly",
+    )
 
 
 def test_cut_keeps_a_linear_deflection_where_the_new_contact_ends():
@@ -104,8 +123,13 @@ def test_cut_keeps_a_linear_deflection_where_the_new_contact_ends():
     a_new = 0.612345
     K._set_radius(drv.cells, drv.st, drv._p, a_new, a_new * a_new / drv._p[K.P_R], None, None)
     exact = _linear_contents(drv, 0, -0.4, 2.3)  # the state now holds the new contact
-    np.testing.assert_allclose(drv.U, exact, rtol=0, atol=1e-12 * drv.grid.dx,
-                               err_msg="the cut does not keep the linear deflection")
+    np.testing.assert_allclose(
+        drv.U,
+        exact,
+        rtol=0,
+        atol=1e-12 * drv.grid.dx,
+        err_msg="the cut does not keep the linear deflection",
+    )
 
 
 @pytest.mark.parametrize("res", [16.0, 32.0])
@@ -122,8 +146,8 @@ def test_level_keeps_between_half_and_twice_the_cells_per_radius(res):
         if a == 0.0:
             assert new == lv, "no contact must keep the level"
             continue
-        cells = res * a * 2 ** new
-        if a > 2.0 ** -levels:
+        cells = res * a * 2**new
+        if a > 2.0**-levels:
             assert res / 2 < cells * (1 + 1e-9) and cells <= 2 * res * (1 + 1e-9), (a, lv, new)
         else:
             assert new == levels, (a, new)
@@ -141,8 +165,15 @@ def test_a_drive_with_levels_keeps_its_energy_ledger():
     u = np.where(np.arange(n) % 8 < 4, 0.5, -0.5)  # a square wave: the patch stays on the row
     for levels in (0, 4):
         params = DriveParams(R, 115.4e9, 95.0e9, mu=0.3, m=1e-4)
-        drv = Drive(params, a_ref=A_MAX, resolution=16.0, stroke=(-4 * A_MAX, 4 * A_MAX),
-                    a_max=A_MAX, t_ref=5e-5, levels=levels)
+        drv = Drive(
+            params,
+            a_ref=A_MAX,
+            resolution=16.0,
+            stroke=(-4 * A_MAX, 4 * A_MAX),
+            a_max=A_MAX,
+            t_ref=5e-5,
+            levels=levels,
+        )
         drv.reset()
         res = drv.run(dt_tick=5e-6, n_sub=40, omega_R=u, v=u * 0.99, N=N * 1.0)
         e = drv.energy

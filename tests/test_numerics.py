@@ -5,6 +5,7 @@ Tolerances, tiered: 1e-4 (in omega R) for zero lines that are exact in the conti
 grid-limited at 32 springs per a1 (measured ~1e-5); 1% of the work put in for the energy ledger
 (``stability.RESID_TOL``); exact zeros for released springs (the kernel sets them to 0.0).
 """
+
 from __future__ import annotations
 
 import csv
@@ -46,7 +47,8 @@ def test_energy_never_created(stability_rows):
         if r["ledger"] and math.isfinite(r["residual"]):
             assert r["residual"] > -r["resid_tol"], (
                 f"{r['case']}: energy residual {r['residual']:.3g} < -{r['resid_tol']} "
-                "(energy created)")
+                "(energy created)"
+            )
 
 
 def test_env_runner_tends_to_the_massless_limit(stability_rows):
@@ -78,7 +80,8 @@ def test_long_run_stays_finite_and_steady():
     assert x["state_ok"], "state energy exceeds the work put in"
     assert x["residual"] > -stability.RESID_TOL, f"energy residual {x['residual']:.3g}"
     assert abs(x["v_last"] - x["v_mid"]) <= 0.02 * abs(x["v_last"]), (
-        f"mean v* drifts: last 10% {x['v_last']:.5g}, middle {x['v_mid']:.5g}")
+        f"mean v* drifts: last 10% {x['v_last']:.5g}, middle {x['v_mid']:.5g}"
+    )
 
 
 def test_substep_refinement_converges():
@@ -99,8 +102,19 @@ def test_dynamic_run_converges_in_dt_at_second_order():
     and the slip work's last difference ratio above 3.4 (measured 3.76: it approaches 4, the
     coarse steps cross several cells per sub-step)."""
     d, ns = converge.DYN, (20, 40, 80, 160, 320, 640)
-    runs = [ex.simulate(d["delta"], d["eps"], d["w"], d["omega_n_ratio"], mu=d["mu"],
-                        periods=6, resolution=32, n_sub=n) for n in ns + (16 * ns[-1],)]
+    runs = [
+        ex.simulate(
+            d["delta"],
+            d["eps"],
+            d["w"],
+            d["omega_n_ratio"],
+            mu=d["mu"],
+            periods=6,
+            resolution=32,
+            n_sub=n,
+        )
+        for n in ns + (16 * ns[-1],)
+    ]
     for key in ("mean_v_star_over_omega_R", "slip_work"):
         vals = np.array([r[key] for r in runs])
         errs = np.abs(vals[:-1] - vals[-1])
@@ -152,7 +166,8 @@ def test_energy_ledger_closes_in_full_sliding():
     at the friction limit, so the ledger closes to 1% at the default sub-steps."""
     res = ex.simulate(0.7, 0.1, 2.5, 0.3, mu=1e-4, periods=20)
     assert res["energy_residual"] > -stability.RESID_TOL, (
-        f"energy residual {res['energy_residual']:.3g} in full sliding")
+        f"energy residual {res['energy_residual']:.3g} in full sliding"
+    )
 
 
 # ----------------------------------------------------------------------------- work-precision
@@ -161,8 +176,14 @@ def test_working_point_error_envelope_falls_at_second_order():
     case = (0.7, 0.1, 2.5)
     ref = analytic.eq32(*case)
     res = [8, 16, 32, 64, 128]
-    errs = [max(abs(ex.working_point(*case, resolution=r, grid_offset=o)["simulated"] - ref)
-                for o in np.arange(4) / 4) / ref for r in res]
+    errs = [
+        max(
+            abs(ex.working_point(*case, resolution=r, grid_offset=o)["simulated"] - ref)
+            for o in np.arange(4) / 4
+        )
+        / ref
+        for r in res
+    ]
     assert all(b < a for a, b in zip(errs, errs[1:])), f"not monotone: {errs}"
     p = converge.order(res, errs)
     assert 1.6 < p < 2.6, f"observed order {p:.2f} (errors {errs})"
@@ -181,18 +202,25 @@ def test_converge_quick_csv(quick_study):
     monotonically from 8 to 128 springs per a1, each doubling by at least a factor 0.6
     (second order gives 0.25), with observed order in [1.5, 2.5]; and a PNG."""
     path = quick_study / "work_precision_quick.csv"
-    assert path.exists() and (quick_study / "work_precision_quick.png").exists(), \
+    assert path.exists() and (quick_study / "work_precision_quick.png").exists(), (
         "converge --quick did not write its CSV and PNG"
+    )
     rows = list(csv.DictReader(path.open()))
     q = f"wp:{converge.WP_CASES[0]}"
-    sel = sorted(((float(r["value"]), float(r["error"]), float(r["observed_order"]))
-                  for r in rows if r["quantity"] == q and 8 <= float(r["value"]) <= 128))
+    sel = sorted(
+        (
+            (float(r["value"]), float(r["error"]), float(r["observed_order"]))
+            for r in rows
+            if r["quantity"] == q and 8 <= float(r["value"]) <= 128
+        )
+    )
     assert [s[0] for s in sel] == [8, 16, 32, 64, 128], f"resolutions in the CSV: {sel}"
     errs = [s[1] for s in sel]
     ratios = [b / a for a, b in zip(errs, errs[1:])]
     assert all(x <= 0.6 for x in ratios), (
         f"working-point error not falling monotonically (tolerance: factor <= 0.6 per "
-        f"doubling): errors {errs}, ratios {ratios}")
+        f"doubling): errors {errs}, ratios {ratios}"
+    )
     assert 1.5 <= sel[0][2] <= 2.5, f"observed order {sel[0][2]} outside [1.5, 2.5]"
     naive = [r for r in rows if r["quantity"].startswith("naive:")]
     assert naive, "the naive reference row is missing from the CSV"
@@ -208,6 +236,7 @@ def test_converge_quick_env_lines(quick_study):
     4x the sub-steps change it by less than 10% (measured 0.085 tolerances at all three)."""
     import rolling_env
     from rolling_env import accuracy
+
     assert converge.ENV_QUICK_SCENES == ("default",)
     rows = list(csv.DictReader((quick_study / "work_precision_quick.csv").open()))
     s0 = rolling_env.make("default").unwrapped.scene.n_sub
@@ -219,8 +248,9 @@ def test_converge_quick_env_lines(quick_study):
         assert [int(float(r["value"])) for r in sel] == want, f"{q}: sub-steps {sel}"
         assert all(0.0 < float(r["seconds"]) < 1e-2 for r in sel), f"{q}: times {sel}"
         lines[q] = {int(float(r["value"])): float(r["error"]) for r in sel}
-    assert not any(r["quantity"].startswith("env_") and ":default" not in r["quantity"]
-                   for r in rows), "quick study has env lines of other scenes"
+    assert not any(
+        r["quantity"].startswith("env_") and ":default" not in r["quantity"] for r in rows
+    ), "quick study has env lines of other scenes"
     acc = accuracy.scene_accuracy("default", timing_repeats=1)
     x_acc = max(e["xstar_error_tol"] for e in acc["episodes"])
     s_acc = max(abs(e["slip_error_pct"]) for e in acc["episodes"]) / 100.0
@@ -267,6 +297,7 @@ def test_fig9_markers_match_eq32():
 def _env_episode(scene, sub_steps, acts):
     """Slip work [J] and final x* [m] of the env driven by ``acts`` at ``sub_steps``."""
     import rolling_env
+
     env = rolling_env.make(scene, sub_steps=sub_steps)
     env.reset(seed=0)
     slip = 0.0
@@ -286,7 +317,8 @@ def test_env_slip_work_converges_second_order_in_the_sub_step():
     d = np.diff(slips)
     ratios = d[:-1] / d[1:]
     assert np.all(ratios > 3.0) and np.exp(np.mean(np.log(ratios))) > 3.5, (
-        f"slip work not second order in the sub-step: difference ratios {ratios}")
+        f"slip work not second order in the sub-step: difference ratios {ratios}"
+    )
 
 
 def test_runner_position_converges_second_order_where_resolved():
@@ -294,8 +326,14 @@ def test_runner_position_converges_second_order_where_resolved():
     periods, 16 cells per a1): its mean velocity at 16, 32, 64 and 128 sub-steps per half
     period (8-64 per runner period); the differences of successive runs shrink by 3.3x or
     more per halving of the step (second order; measured 3.5-4.1)."""
-    v = np.array([ex.simulate(0.7, 0.1, 2.5, 2.0, periods=6, resolution=16, n_sub=n)[
-        "mean_v_star_over_omega_R"] for n in (16, 32, 64, 128)])
+    v = np.array(
+        [
+            ex.simulate(0.7, 0.1, 2.5, 2.0, periods=6, resolution=16, n_sub=n)[
+                "mean_v_star_over_omega_R"
+            ]
+            for n in (16, 32, 64, 128)
+        ]
+    )
     d = np.diff(v)
     ratios = d[:-1] / d[1:]
     assert np.all(ratios > 3.3), f"x* not second order in the sub-step: ratios {ratios}"

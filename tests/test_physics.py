@@ -4,6 +4,7 @@ Tolerances: 1e-10 where the discretisation is exact (normal force, linearity, mi
 1e-3 for discretisation-limited quantities at the default resolution, looser where the
 physics itself (start-up transients, resonance) sets the error; each assert says why.
 """
+
 from __future__ import annotations
 
 import math
@@ -23,8 +24,14 @@ GEO = ex.Geometry()
 
 def _drive(params=None, resolution=32, stroke=(0.0, 0.0), a_max=None):
     params = params or DriveParams(GEO.R, GEO.E_star, GEO.G_star)
-    return Drive(params, a_ref=GEO.a1, resolution=resolution, stroke=stroke,
-                 a_max=a_max or GEO.a1, t_ref=GEO.tau)
+    return Drive(
+        params,
+        a_ref=GEO.a1,
+        resolution=resolution,
+        stroke=stroke,
+        a_max=a_max or GEO.a1,
+        t_ref=GEO.tau,
+    )
 
 
 # ----------------------------------------------------------------------------- normal contact
@@ -60,16 +67,24 @@ def test_mindlin_converges_with_resolution():
 
 
 # ----------------------------------------------------------------------------- working points
-CASES = [(0.93, 0.2, 2.2), (0.7, 0.1, 2.5), (0.5, 0.3, 5.0), (0.2, -0.3, 3.0),
-         (0.85, 0.6, 10.0), (0.4, 0.0, 2.0)]
+CASES = [
+    (0.93, 0.2, 2.2),
+    (0.7, 0.1, 2.5),
+    (0.5, 0.3, 5.0),
+    (0.2, -0.3, 3.0),
+    (0.85, 0.6, 10.0),
+    (0.4, 0.0, 2.0),
+]
 
 
 @pytest.mark.parametrize("delta,eps,w", CASES)
 def test_working_point_matches_eq32(delta, eps, w):
     """Zero-impulse working point vs Eq. 32: rel. error < 1e-3 at the default resolution."""
     r = ex.working_point(delta, eps, w)
-    assert r["rel_error"] < 1e-3, (f"working point {r['simulated']:.6f} vs Eq. 32 "
-                                   f"{r['eq32']:.6f} (rel {r['rel_error']:.2e}) at {delta, eps, w}")
+    assert r["rel_error"] < 1e-3, (
+        f"working point {r['simulated']:.6f} vs Eq. 32 "
+        f"{r['eq32']:.6f} (rel {r['rel_error']:.2e}) at {delta, eps, w}"
+    )
 
 
 def test_working_point_tends_to_eq29_at_large_w():
@@ -177,12 +192,14 @@ def test_resonant_band_exceeds_quasi_static_and_stiff_runner_collapses():
     assert res > 1.05 * eq, f"resonant band: {res} should exceed Eq. 32 {eq}"
     assert stiff["step_converged"], stiff["step_note"]
     assert abs(v - STIFF_R5_CONVERGED) <= ex.STEP_TOL_REL * STIFF_R5_CONVERGED, (
-        f"stiff runner: {v} vs converged {STIFF_R5_CONVERGED}")
+        f"stiff runner: {v} vs converged {STIFF_R5_CONVERGED}"
+    )
     assert v < 0.3 * eq, f"stiff runner: {v} should stay well below Eq. 32 {eq}"
 
 
-@pytest.mark.parametrize("r,mu,eps", [(0.3, math.inf, 0.1), (1.0, math.inf, 0.1),
-                                      (0.3, 0.3, 0.995), (0.3, 0.1, 0.9)])
+@pytest.mark.parametrize(
+    "r,mu,eps", [(0.3, math.inf, 0.1), (1.0, math.inf, 0.1), (0.3, 0.3, 0.995), (0.3, 0.1, 0.9)]
+)
 def test_energy_is_not_created(r, mu, eps):
     """Work in = kinetic + elastic + released + slip (+ numerical dissipation >= 0).
     The residual (relative to the drive work) lies in [-2e-3, 5e-2]: discretisation-level,
@@ -198,10 +215,10 @@ def test_sliding_runner_brought_to_rest_books_its_kinetic_energy_as_slip():
     starts from it) to 1e-3, and the residual is within 1e-3 of it (measured 5.6e-4; it was
     -1.0 of it: the starting kinetic energy was missing from the balance)."""
     m = 1e-3
-    d1 = GEO.a1 ** 2 / GEO.R
+    d1 = GEO.a1**2 / GEO.R
     drv = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=0.3, m=m), resolution=64)
     drv.reset(vstar0=1.0)
-    kin0 = 0.5 * m * 1.0 ** 2
+    kin0 = 0.5 * m * 1.0**2
     n = 400
     N1 = analytic.hertz_force(d1, GEO.R, GEO.E_star)
     t_stop = m * 1.0 / (0.3 * N1)
@@ -250,8 +267,12 @@ def test_energy_ledger_is_scale_free_in_mu():
     its unclipped creep, a mu-independent amount: -25% at mu = 1e-6 before it was bounded by
     what the cell can hold.)  640 sub-steps per half period (1/16 cell): the residual of full
     sliding is first order in the step (measured -1.2e-3 here, -2.5e-3 at 320)."""
-    res = [ex.simulate(0.7, 0.1, 2.5, 0.3, mu=mu, periods=4, resolution=16,
-                       n_sub=640)["energy_residual"] for mu in (1e-2, 1e-4, 1e-7)]
+    res = [
+        ex.simulate(0.7, 0.1, 2.5, 0.3, mu=mu, periods=4, resolution=16, n_sub=640)[
+            "energy_residual"
+        ]
+        for mu in (1e-2, 1e-4, 1e-7)
+    ]
     assert all(-2e-3 < x < 5e-2 for x in res), f"residuals {res}"
     assert max(res) - min(res) < 2e-4, f"residual depends on mu: {res}"
 
@@ -262,8 +283,10 @@ def test_energy_ledger_is_scale_free_in_mu_with_coarse_substeps():
     in mu: the bound on a leaving cell's release is taken where the contact centre came
     closest to the cell (it was taken at the sub-step's start: -8e3 at mu = 1e-2, -8e6 at
     1e-5)."""
-    res = [ex.simulate(0.7, 0.1, 2.5, 0.3, mu=mu, periods=4, resolution=16,
-                       n_sub=1)["energy_residual"] for mu in (1e-2, 1e-5)]
+    res = [
+        ex.simulate(0.7, 0.1, 2.5, 0.3, mu=mu, periods=4, resolution=16, n_sub=1)["energy_residual"]
+        for mu in (1e-2, 1e-5)
+    ]
     assert all(abs(x) < 4.0 for x in res), f"residuals {res}"
     assert abs(res[0] - res[1]) < 1e-3, f"residual depends on mu: {res}"
 
@@ -316,8 +339,15 @@ def test_lift_off_releases_everything():
 
 
 # ----------------------------------------------------------------------------- bad input
-@pytest.mark.parametrize("kw,name", [(dict(R=-1.0), "R"), (dict(mu=-0.1), "mu"),
-                                     (dict(E_star=float("nan")), "E_star"), (dict(m=-1.0), "m")])
+@pytest.mark.parametrize(
+    "kw,name",
+    [
+        (dict(R=-1.0), "R"),
+        (dict(mu=-0.1), "mu"),
+        (dict(E_star=float("nan")), "E_star"),
+        (dict(m=-1.0), "m"),
+    ],
+)
 def test_bad_params_rejected(kw, name):
     base = dict(R=1e-3, E_star=1e11, G_star=8e10)
     base.update(kw)
@@ -325,28 +355,43 @@ def test_bad_params_rejected(kw, name):
         DriveParams(**base)
 
 
-@pytest.mark.parametrize("args,name", [((1.5, 0.1, 2.5), "delta"), ((0.7, 0.1, -1.0), "w"),
-                                       ((0.7, float("nan"), 2.5), "eps")])
+@pytest.mark.parametrize(
+    "args,name",
+    [((1.5, 0.1, 2.5), "delta"), ((0.7, 0.1, -1.0), "w"), ((0.7, float("nan"), 2.5), "eps")],
+)
 def test_bad_dimensionless_inputs_rejected(args, name):
     with pytest.raises(ValueError, match=name):
         ex.working_point(*args)
 
 
-
-@pytest.mark.parametrize("r,got", [(-1, "got -1.0"), (np.float64(-2.0), "got -2.0"),
-                                   (float("nan"), "got NaN"), (1e-200, "got 1e-200"),
-                                   (1e200, "got 1e+200"), (-math.inf, "got -inf"),
-                                   (10**400, "got an integer too large for a float")])
+@pytest.mark.parametrize(
+    "r,got",
+    [
+        (-1, "got -1.0"),
+        (np.float64(-2.0), "got -2.0"),
+        (float("nan"), "got NaN"),
+        (1e-200, "got 1e-200"),
+        (1e200, "got 1e+200"),
+        (-math.inf, "got -inf"),
+        (10**400, "got an integer too large for a float"),
+    ],
+)
 def test_omega_n_ratio_out_of_range_gets_one_message(r, got):
     """Every bad omega_n/Omega gets the one message with all three allowed forms (a negative
     value was told only "[0, inf] or inf", which 1e-200 also satisfies)."""
     with pytest.raises(ValueError) as e:
         ex.check_omega_n_ratio(r)
     msg = str(e.value)
-    assert msg.startswith("omega_n_ratio must be 0 (infinitely heavy runner), inf (massless) "
-                          "or in [1e-100, 1e+100], ") and got in msg, msg
+    assert (
+        msg.startswith(
+            "omega_n_ratio must be 0 (infinitely heavy runner), inf (massless) "
+            "or in [1e-100, 1e+100], "
+        )
+        and got in msg
+    ), msg
     for ok in (0, 0.0, math.inf, 1e-100, 1.0, 1e100):
         assert ex.check_omega_n_ratio(ok) == ok
+
 
 @pytest.mark.parametrize("bad", [2.5, math.inf, math.nan, None, True, 10**20, 1])
 def test_run_lengths_are_integers_in_range(bad):
@@ -362,14 +407,22 @@ def test_run_lengths_are_integers_in_range(bad):
             ex.mindlin(0.3, points=5, resolution=8, n_sub=bad)
 
 
-@pytest.mark.parametrize("call,match", [
-    (lambda: ex.simulate(0.7, 0.1, 2.5, 0.5, n_sub=2.5, periods=4), r"^n_sub must be an integer"),
-    (lambda: ex.simulate(0.7, 0.1, 2.5, 0.5, direction=True, periods=4),
-     r"^direction must be \+1 or -1, got True"),
-    (lambda: ex.period_impulse(0.7, 0.1, 2.5, float("nan")), r"^vstar_ratio must be in"),
-    (lambda: ex.force_sum(0.7, 0.1, 2.5, "x"), r"^vstar_ratio must be a number"),
-    (lambda: ex.simulate(0.7, 0.1, 2.5, 0.5, F_ext=float("inf"), periods=4), r"^F_ext must be"),
-])
+@pytest.mark.parametrize(
+    "call,match",
+    [
+        (
+            lambda: ex.simulate(0.7, 0.1, 2.5, 0.5, n_sub=2.5, periods=4),
+            r"^n_sub must be an integer",
+        ),
+        (
+            lambda: ex.simulate(0.7, 0.1, 2.5, 0.5, direction=True, periods=4),
+            r"^direction must be \+1 or -1, got True",
+        ),
+        (lambda: ex.period_impulse(0.7, 0.1, 2.5, float("nan")), r"^vstar_ratio must be in"),
+        (lambda: ex.force_sum(0.7, 0.1, 2.5, "x"), r"^vstar_ratio must be a number"),
+        (lambda: ex.simulate(0.7, 0.1, 2.5, 0.5, F_ext=float("inf"), periods=4), r"^F_ext must be"),
+    ],
+)
 def test_experiment_inputs_are_checked_not_truncated(call, match):
     """n_sub = 2.5 ran as 2 in simulate (int() before the check), direction=True ran as +1, a
     NaN prescribed velocity was reported as "vstar must be finite" (no parameter, no range)."""
@@ -383,8 +436,10 @@ def test_numeric_strings_are_the_numbers_they_spell():
     a = ex.working_point(0.7, "0.1", 2.5, resolution=8)["simulated"]
     assert a == ex.working_point(0.7, 0.1, 2.5, resolution=8)["simulated"], a
     r = ex.simulate(0.7, 0.1, 2.5, 0.5, mu="0.3", periods=4)
-    assert r["mean_v_star_over_omega_R"] == ex.simulate(0.7, 0.1, 2.5, 0.5, mu=0.3,
-                                                        periods=4)["mean_v_star_over_omega_R"]
+    assert (
+        r["mean_v_star_over_omega_R"]
+        == ex.simulate(0.7, 0.1, 2.5, 0.5, mu=0.3, periods=4)["mean_v_star_over_omega_R"]
+    )
 
 
 def test_working_point_runs_to_periodic_steady_state():
@@ -430,14 +485,17 @@ def test_drive_params_store_checked_floats():
     assert type(p.R) is float and p.R == 1e-3 and p.mu == 0.2, f"{p}"
 
 
-@pytest.mark.parametrize("call,name", [
-    (lambda d: d.reset(vstar0=math.inf), "vstar0"),
-    (lambda d: d.reset(c0=math.nan), "c0"),
-    (lambda d: d.reset(c0=1.0), "c0"),
-    (lambda d: d.run(dt_tick=1e-6, n_sub=2**63, omega_R=0.0, v=0.0, N=0.1, vstar=0.0), "n_sub"),
-    (lambda d: d.run(dt_tick=1e-6, n_sub="2", omega_R=0.0, v=0.0, N=0.1, vstar=0.0), "n_sub"),
-    (lambda d: d.run(dt_tick=1e-6, n_sub=1.5, omega_R=0.0, v=0.0, N=0.1, vstar=0.0), "n_sub"),
-])
+@pytest.mark.parametrize(
+    "call,name",
+    [
+        (lambda d: d.reset(vstar0=math.inf), "vstar0"),
+        (lambda d: d.reset(c0=math.nan), "c0"),
+        (lambda d: d.reset(c0=1.0), "c0"),
+        (lambda d: d.run(dt_tick=1e-6, n_sub=2**63, omega_R=0.0, v=0.0, N=0.1, vstar=0.0), "n_sub"),
+        (lambda d: d.run(dt_tick=1e-6, n_sub="2", omega_R=0.0, v=0.0, N=0.1, vstar=0.0), "n_sub"),
+        (lambda d: d.run(dt_tick=1e-6, n_sub=1.5, omega_R=0.0, v=0.0, N=0.1, vstar=0.0), "n_sub"),
+    ],
+)
 def test_drive_state_and_step_arguments_checked(call, name):
     """reset() and run() reject non-finite or out-of-stroke states and a sub-step count that
     is not an integer in range, naming the argument (these once gave a meaningless v*, a
@@ -446,9 +504,14 @@ def test_drive_state_and_step_arguments_checked(call, name):
         call(_drive())
 
 
-@pytest.mark.parametrize("stroke,match", [((0.0, math.inf), r"stroke\[1\]"),
-                                          ((1e-5, 0.0, 1.0), "stroke must be a pair"),
-                                          ((1e-5, -1e-5), "c_min <= c_max")])
+@pytest.mark.parametrize(
+    "stroke,match",
+    [
+        ((0.0, math.inf), r"stroke\[1\]"),
+        ((1e-5, 0.0, 1.0), "stroke must be a pair"),
+        ((1e-5, -1e-5), "c_min <= c_max"),
+    ],
+)
 def test_drive_stroke_checked(stroke, match):
     with pytest.raises(ValueError, match=match):
         _drive(stroke=stroke)
@@ -457,8 +520,12 @@ def test_drive_stroke_checked(stroke, match):
 def test_geometry_ranges():
     """a1/R below 1e-6 made the energy unit 2 G* a1^3 underflow (NaN slip work); R, E* and tau
     follow the scenes' physical ranges."""
-    for kw, name in ((dict(a_over_r=1e-160), "a_over_r"), (dict(R=1e-300), "R"),
-                     (dict(tau=0.0), "tau"), (dict(E_star=math.inf), "E_star")):
+    for kw, name in (
+        (dict(a_over_r=1e-160), "a_over_r"),
+        (dict(R=1e-300), "R"),
+        (dict(tau=0.0), "tau"),
+        (dict(E_star=math.inf), "E_star"),
+    ):
         with pytest.raises(ValueError, match=name):
             ex.Geometry(**kw)
 
@@ -477,11 +544,14 @@ def test_runner_equation_holds_in_partial_slip(m, load_fraction):
     integral of (T + F_ext) dt over the run holds to 2e-3 of the load's impulse (the force's
     integral by the trapezoid over 400 ticks of one sub-step each: its own error), and the
     runner, steady after the transient, carries the load: mean T + F_ext within 1% of mu N."""
-    N1 = 4 / 3 * GEO.E_star * math.sqrt(GEO.R) * (GEO.a1 ** 2 / GEO.R) ** 1.5
+    N1 = 4 / 3 * GEO.E_star * math.sqrt(GEO.R) * (GEO.a1**2 / GEO.R) ** 1.5
     mu = 0.3
     F = -load_fraction * mu * N1
-    drv = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=m, F_ext=F),
-                 resolution=16, stroke=(-40 * GEO.a1, 40 * GEO.a1))
+    drv = _drive(
+        DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=m, F_ext=F),
+        resolution=16,
+        stroke=(-40 * GEO.a1, 40 * GEO.a1),
+    )
     drv.reset(c0=-30 * GEO.a1)
     k = 400
     u = 60 * GEO.a1 / GEO.tau
@@ -494,7 +564,7 @@ def test_runner_equation_holds_in_partial_slip(m, load_fraction):
     impulse = dt * (np.sum(0.5 * (T[1:] + T[:-1])) + k * F)
     gap = abs(m * out["vstar"][-1] - impulse) / (k * dt * abs(F))
     assert gap < 2e-3, f"momentum balance off by {gap:.1e} of the load's impulse"
-    mean = abs(np.mean(out["T"][k // 2:]) + F) / (mu * N1)
+    mean = abs(np.mean(out["T"][k // 2 :]) + F) / (mu * N1)
     assert mean < 1e-2, f"mean T + F_ext = {mean:.1e} mu N: the runner does not carry the load"
 
 
@@ -504,8 +574,11 @@ def test_massless_runner_without_contact_keeps_zero_creep(mu):
     take the limit of a vanishing contact, v* = omega R - v (no creep), so x* does not depend on
     which friction path ran."""
     a1 = GEO.a1
-    drv = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=0.0), resolution=8,
-                 stroke=(-4 * a1, 4 * a1))
+    drv = _drive(
+        DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=0.0),
+        resolution=8,
+        stroke=(-4 * a1, 4 * a1),
+    )
     drv.reset()
     u, v = 0.02, [0.0199, 0.0, 0.005]
     out = drv.run(dt_tick=1e-4, n_sub=4, omega_R=[u] * 3, v=v, d=[a1 * a1 / GEO.R, 0.0, 0.0])
@@ -516,8 +589,9 @@ def test_massless_runner_without_contact_keeps_zero_creep(mu):
 def test_tiny_rolling_rate_stays_finite(mu):
     """|omega R| near the smallest double (1e-310 in kernel units) must not overflow a
     reciprocal: the step is finite and the contact barely moves."""
-    drv = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=1e-3),
-                 stroke=(-2 * GEO.a1, 2 * GEO.a1))
+    drv = _drive(
+        DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=1e-3), stroke=(-2 * GEO.a1, 2 * GEO.a1)
+    )
     drv.reset()
     out = drv.run(dt_tick=1e-4, n_sub=4, omega_R=[1e-312, -1e-312], v=[0.0, 0.0], N=[0.5, 0.5])
     assert np.all(np.isfinite(out["T"])) and np.all(np.isfinite(out["vstar"]))
@@ -525,24 +599,34 @@ def test_tiny_rolling_rate_stays_finite(mu):
 
 @pytest.mark.parametrize("speed, n_sub", [(1e3, 8), (1e3, 1), (1e17, 1), (1e300, 8)])
 @pytest.mark.parametrize("direction", [-1.0, 1.0])
-@pytest.mark.parametrize("mu, m", [(0.3, 1e-3), (0.3, math.inf), (math.inf, 1e-3),
-                                   (math.inf, math.inf), (0.3, 0.0)])
+@pytest.mark.parametrize(
+    "mu, m", [(0.3, 1e-3), (0.3, math.inf), (math.inf, 1e-3), (math.inf, math.inf), (0.3, 0.0)]
+)
 def test_contact_leaving_the_row_raises_and_releases_every_cell(speed, n_sub, direction, mu, m):
     """A rolling rate that carries the contact off the spring row within a tick (sub-steps
     wholly beyond either end, cell indices far outside the int64 range at 1e17 and 1e300 m/s)
     raises the grid error, and every cell the contact swept over was released on the way: the
     row is left all zero and finite (an undefined float-to-int conversion once left it stale
     without an error, or crashed)."""
-    drv = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=m), resolution=16,
-                 stroke=(-2 * GEO.a1, 2 * GEO.a1))
+    drv = _drive(
+        DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=m),
+        resolution=16,
+        stroke=(-2 * GEO.a1, 2 * GEO.a1),
+    )
     drv.reset()
-    d1 = GEO.a1 ** 2 / GEO.R  # contact half-width a1
+    d1 = GEO.a1**2 / GEO.R  # contact half-width a1
 
     def run(omega_R, d, n):
         k = len(omega_R)
         vs = {"vstar": np.zeros(k)} if m == math.inf else {}
-        return drv.run(dt_tick=GEO.tau / 8, n_sub=n, omega_R=np.array(omega_R),
-                       v=np.zeros(k), d=np.array(d), **vs)
+        return drv.run(
+            dt_tick=GEO.tau / 8,
+            n_sub=n,
+            omega_R=np.array(omega_R),
+            v=np.zeros(k),
+            d=np.array(d),
+            **vs,
+        )
 
     run([0.05], [d1], 4)  # rolls 0.3 a1 without translating: a loaded, deflected contact
     # (a massless runner takes no load and follows the sphere: its contact stays undeflected)
@@ -559,15 +643,26 @@ def test_friction_limit_overflowing_to_inf_gives_no_slip():
     limit times a zero excess is NaN, never added), and the slip work is the elastic energy
     the trailing edge carries out, which the same run with infinite friction books as
     release (to 5%): the wear's limit as mu grows."""
-    drv = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=1.6e308, m=1e-3),
-                 resolution=16, stroke=(-2 * GEO.a1, 2 * GEO.a1))
+    drv = _drive(
+        DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=1.6e308, m=1e-3),
+        resolution=16,
+        stroke=(-2 * GEO.a1, 2 * GEO.a1),
+    )
     drv.reset()
-    d1 = GEO.a1 ** 2 / GEO.R
-    run = dict(dt_tick=GEO.tau / 8, n_sub=8, omega_R=np.full(6, 0.01), v=np.full(6, 0.009),
-               d=np.array([d1, d1, 0.5 * d1, d1, 0.3 * d1, d1]))
+    d1 = GEO.a1**2 / GEO.R
+    run = dict(
+        dt_tick=GEO.tau / 8,
+        n_sub=8,
+        omega_R=np.full(6, 0.01),
+        v=np.full(6, 0.009),
+        d=np.array([d1, d1, 0.5 * d1, d1, 0.3 * d1, d1]),
+    )
     out = drv.run(**run)
-    inf = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, m=1e-3), resolution=16,
-                 stroke=(-2 * GEO.a1, 2 * GEO.a1))
+    inf = _drive(
+        DriveParams(GEO.R, GEO.E_star, GEO.G_star, m=1e-3),
+        resolution=16,
+        stroke=(-2 * GEO.a1, 2 * GEO.a1),
+    )
     inf.reset()
     inf.run(**run)
     e, e_inf = drv.energy, inf.energy
@@ -575,7 +670,8 @@ def test_friction_limit_overflowing_to_inf_gives_no_slip():
     # (the two integrate the trailing edge differently: the walk's release integral and the
     # edge cell's energy balance; 2.7% apart on this short, coarse run)
     assert e["slip"] > 0.0 and abs(e["slip"] + e["release"] - e_inf["release"]) <= (
-        5e-2 * e_inf["release"]), (e["slip"], e["release"], e_inf["release"])
+        5e-2 * e_inf["release"]
+    ), (e["slip"], e["release"], e_inf["release"])
     assert np.all(np.isfinite(out["T"])) and np.all(out["T"] != 0.0), out["T"]
     # an inf limit holds every cell: the whole contact sticks (it read 0, "all slipping",
     # when the stick test compared -inf < -inf)
@@ -583,8 +679,14 @@ def test_friction_limit_overflowing_to_inf_gives_no_slip():
 
 
 def _flag_drive(m, F_ext):
-    drv = Drive(DriveParams(1e-3, 1e11, 1e11, mu=0.2, m=m, F_ext=F_ext), a_ref=1e-5,
-                resolution=4, stroke=(-1e-5, 1e-5), a_max=1e-5, t_ref=1e-4)
+    drv = Drive(
+        DriveParams(1e-3, 1e11, 1e11, mu=0.2, m=m, F_ext=F_ext),
+        a_ref=1e-5,
+        resolution=4,
+        stroke=(-1e-5, 1e-5),
+        a_max=1e-5,
+        t_ref=1e-4,
+    )
     drv.reset()
     return drv
 
@@ -619,7 +721,7 @@ def test_no_equilibrium_error_does_not_refuse_the_next_run():
 
 # ------------------------------------------------------------------- massless runner under load
 def _N1():
-    return analytic.hertz_force(GEO.a1 ** 2 / GEO.R, GEO.R, GEO.E_star)
+    return analytic.hertz_force(GEO.a1**2 / GEO.R, GEO.R, GEO.E_star)
 
 
 @pytest.mark.parametrize("mu", [0.25, math.inf])
@@ -630,8 +732,9 @@ def test_massless_runner_under_load_is_in_force_equilibrium(mu, fraction):
     0.9 x 0.25 N1 keeps T + F_ext = 0 to 1e-12 of N1 in every tick."""
     N1 = _N1()
     F = fraction * 0.25 * N1
-    drv = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=0.0, F_ext=F),
-                 stroke=(0.0, 4 * GEO.a1))
+    drv = _drive(
+        DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=0.0, F_ext=F), stroke=(0.0, 4 * GEO.a1)
+    )
     drv.reset()
     k, dt = 50, 1e-5
     u = 4 * GEO.a1 / (k * dt)  # rolls 4 a1 in the run
@@ -640,8 +743,10 @@ def test_massless_runner_under_load_is_in_force_equilibrium(mu, fraction):
     assert err < 1e-12, f"massless runner: max |T + F_ext| = {err:.1e} N1 (mu = {mu})"
 
 
-@pytest.mark.parametrize("mu, fraction, N", [(0.25, 1.2, "N1"), (0.25, -1.5, "N1"),
-                                             (0.25, 0.1, 0.0), (math.inf, 0.1, 0.0)])
+@pytest.mark.parametrize(
+    "mu, fraction, N",
+    [(0.25, 1.2, "N1"), (0.25, -1.5, "N1"), (0.25, 0.1, 0.0), (math.inf, 0.1, 0.0)],
+)
 def test_massless_runner_without_equilibrium_raises(mu, fraction, N):
     """No equilibrium exists for a massless runner when |F_ext| exceeds what the contact holds
     (mu N with finite friction, nothing without contact): the run raises a ValueError saying so
@@ -649,8 +754,9 @@ def test_massless_runner_without_equilibrium_raises(mu, fraction, N):
     was dropped silently)."""
     N1 = _N1()
     F = fraction * 0.25 * N1
-    drv = _drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=0.0, F_ext=F),
-                 stroke=(0.0, 4 * GEO.a1))
+    drv = _drive(
+        DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=0.0, F_ext=F), stroke=(0.0, 4 * GEO.a1)
+    )
     drv.reset()
     with pytest.raises(ValueError, match="no force equilibrium.*finite mass"):
         drv.run(dt_tick=1e-5, n_sub=4, omega_R=0.1, v=0.0, N=N1 if N == "N1" else N)
@@ -661,10 +767,13 @@ def test_scene_massless_runner_load_only_where_the_contact_holds_it():
     a force equilibrium (the env kernel cannot report the sliding case); beyond, or with
     N_min = 0 (lift-off), the scene is refused naming F_ext and mu N_min."""
     from rolling_env.scenes import load_scene
+
     sc = load_scene("default", runner_mass=0.0, N_min=0.2, F_ext=0.9 * 0.2 * 0.2, mu=0.2)
     assert sc.runner_mass == 0.0 and sc.F_ext == pytest.approx(0.036, rel=1e-12)
-    for kw, held in ((dict(N_min=0.2, F_ext=0.05, mu=0.2), "0.04 N"),
-                     (dict(N_min=0.0, F_ext=1e-6, mu=math.inf), "= 0 N")):
+    for kw, held in (
+        (dict(N_min=0.2, F_ext=0.05, mu=0.2), "0.04 N"),
+        (dict(N_min=0.0, F_ext=1e-6, mu=math.inf), "= 0 N"),
+    ):
         with pytest.raises(ValueError, match=r"'F_ext' must satisfy \|F_ext\| < mu N_min") as e:
             load_scene("default", runner_mass=0.0, **kw)
         assert held in str(e.value) and "nan" not in str(e.value), str(e.value)
@@ -683,10 +792,13 @@ def test_delta_zero_runner_follows_the_sphere(eps):
 
 
 # ----------------------------------------------------------------------------- non-finite results
-@pytest.mark.parametrize("params, run_kw, match", [
-    (dict(), dict(vstar=0.0), "overflowed"),
-    (dict(m=1.0, F_ext=1.0), dict(), "overflowed"),
-])
+@pytest.mark.parametrize(
+    "params, run_kw, match",
+    [
+        (dict(), dict(vstar=0.0), "overflowed"),
+        (dict(m=1.0, F_ext=1.0), dict(), "overflowed"),
+    ],
+)
 def test_overflow_in_a_run_raises_naming_it(params, run_kw, match):
     """dt_tick = 1e300 s overflows the impulse / energy ledger: Drive.run raises
     FloatingPointError naming what overflowed and what to reduce (it returned impulse = NaN,
@@ -699,12 +811,19 @@ def test_overflow_in_a_run_raises_naming_it(params, run_kw, match):
     with pytest.raises(FloatingPointError, match=r"earlier run stopped.*reset\(\)"):
         drv.run(dt_tick=1e-6, n_sub=1, omega_R=0.0, v=0.0, N=0.1, **run_kw)
     drv.reset()
-    assert np.isfinite(drv.run(dt_tick=1e-6, n_sub=1, omega_R=0.0, v=0.0, N=0.1, **run_kw)["T"]).all()
+    assert np.isfinite(
+        drv.run(dt_tick=1e-6, n_sub=1, omega_R=0.0, v=0.0, N=0.1, **run_kw)["T"]
+    ).all()
 
 
-@pytest.mark.parametrize("kw, name", [(dict(G_star=1e-300), "E_star/G_star"),
-                                      (dict(E_star=1e-300), "E_star/G_star"),
-                                      (dict(R=1e308), "R/a_ref")])
+@pytest.mark.parametrize(
+    "kw, name",
+    [
+        (dict(G_star=1e-300), "E_star/G_star"),
+        (dict(E_star=1e-300), "E_star/G_star"),
+        (dict(R=1e308), "R/a_ref"),
+    ],
+)
 def test_scales_outside_the_float_range_rejected(kw, name):
     """Moduli or sizes whose kernel scales overflow (E*/G* = inf made N come back inf) or
     underflow are a ValueError naming the scale, raised when the Drive is built."""
@@ -721,28 +840,43 @@ def _run0(drv, **kw):
     return drv.run(**args)
 
 
-@pytest.mark.parametrize("call, name", [
-    (lambda: _run0(_drive(), omega_R="x"), "omega_R must be a real number"),
-    (lambda: _run0(_drive(), N=[0.1, "a"]), "N must be a real number"),
-    (lambda: _run0(_drive(), v=[True]), "v must be a real number"),
-    (lambda: _run0(_drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, m=1.0)), vstar=5.0),
-     "vstar is only for a prescribed runner"),
-    (lambda: DriveParams(True, GEO.E_star, GEO.G_star), "R must be a number, got the boolean"),
-    (lambda: DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=np.bool_(True)), "mu must be a number"),
-    (lambda: _drive().set_state((np.zeros(3), np.zeros(K.N_STATE))), "state U must be"),
-    (lambda: _drive().set_state((np.zeros(_drive().grid.n), np.full(K.N_STATE, np.nan))),
-     "state st must be finite"),
-    (lambda: _drive().set_state(None), "state must be the pair"),
-    (lambda: _drive(stroke=(2 * GEO.a1, 3 * GEO.a1)).reset(), "c0 must be in .*inside the stroke"),
-    (lambda: ex.simulate(0.5, 0.1, 2.5, 0.3, ticks_per_half=0, periods=2), "ticks_per_half"),
-    (lambda: ex.simulate(0.5, 0.1, 2.5, 0.3, periods=10**12, n_sub=1), "periods"),
-    (lambda: ex.simulate(0.5, 0.1, 2.5, 0.3, periods=10**6, ticks_per_half=100, n_sub=1),
-     "exceeds 5e\\+06"),
-    (lambda: ex.force_sum(0.9, 0.1, 2.5, 0.0, resolution=0.6), "resolution"),
-    (lambda: ex.period_impulse(0.9, 0.1, 2.5, 0.0, resolution=0.6), "resolution"),
-    (lambda: ex.period_impulse(1.5, 0.1, 2.5, 0.0), "delta"),
-    (lambda: ex.force_sum(0.9, 0.1, 2.5, 0.0, ticks_per_half=0), "ticks_per_half"),
-])
+@pytest.mark.parametrize(
+    "call, name",
+    [
+        (lambda: _run0(_drive(), omega_R="x"), "omega_R must be a real number"),
+        (lambda: _run0(_drive(), N=[0.1, "a"]), "N must be a real number"),
+        (lambda: _run0(_drive(), v=[True]), "v must be a real number"),
+        (
+            lambda: _run0(_drive(DriveParams(GEO.R, GEO.E_star, GEO.G_star, m=1.0)), vstar=5.0),
+            "vstar is only for a prescribed runner",
+        ),
+        (lambda: DriveParams(True, GEO.E_star, GEO.G_star), "R must be a number, got the boolean"),
+        (
+            lambda: DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=np.bool_(True)),
+            "mu must be a number",
+        ),
+        (lambda: _drive().set_state((np.zeros(3), np.zeros(K.N_STATE))), "state U must be"),
+        (
+            lambda: _drive().set_state((np.zeros(_drive().grid.n), np.full(K.N_STATE, np.nan))),
+            "state st must be finite",
+        ),
+        (lambda: _drive().set_state(None), "state must be the pair"),
+        (
+            lambda: _drive(stroke=(2 * GEO.a1, 3 * GEO.a1)).reset(),
+            "c0 must be in .*inside the stroke",
+        ),
+        (lambda: ex.simulate(0.5, 0.1, 2.5, 0.3, ticks_per_half=0, periods=2), "ticks_per_half"),
+        (lambda: ex.simulate(0.5, 0.1, 2.5, 0.3, periods=10**12, n_sub=1), "periods"),
+        (
+            lambda: ex.simulate(0.5, 0.1, 2.5, 0.3, periods=10**6, ticks_per_half=100, n_sub=1),
+            "exceeds 5e\\+06",
+        ),
+        (lambda: ex.force_sum(0.9, 0.1, 2.5, 0.0, resolution=0.6), "resolution"),
+        (lambda: ex.period_impulse(0.9, 0.1, 2.5, 0.0, resolution=0.6), "resolution"),
+        (lambda: ex.period_impulse(1.5, 0.1, 2.5, 0.0), "delta"),
+        (lambda: ex.force_sum(0.9, 0.1, 2.5, 0.0, ticks_per_half=0), "ticks_per_half"),
+    ],
+)
 def test_more_inputs_checked_with_named_errors(call, name):
     """Each gave numpy's 'could not convert string to float', a bool taken as 1.0, a vstar
     silently ignored, an unchecked state, a misleading grid error on the first run, a
@@ -765,7 +899,7 @@ def test_simulate_load_is_in_the_absolute_frame():
     """``simulate``'s F_ext is not mirrored by ``direction``: the mirrored run with +F equals
     the unmirrored run with -F (mean v* in the paper convention, 1e-9), and differs from the
     unmirrored run with +F."""
-    F = 0.05 * 2 * GEO.G_star * GEO.a1 ** 2  # a load of 5% of the stuck force scale
+    F = 0.05 * 2 * GEO.G_star * GEO.a1**2  # a load of 5% of the stuck force scale
     kw = dict(periods=6, resolution=16)
     mir = ex.simulate(0.7, 0.1, 2.5, 0.3, direction=-1, F_ext=F, **kw)["mean_v_star_over_omega_R"]
     neg = ex.simulate(0.7, 0.1, 2.5, 0.3, direction=1, F_ext=-F, **kw)["mean_v_star_over_omega_R"]
@@ -779,7 +913,9 @@ def test_env_with_a_loaded_massless_runner_keeps_equilibrium():
     after every tick of random actions the contact holds the load, T + F_ext = 0 to 1e-12 of
     mu N_min, and the observation stays finite."""
     import gymnasium as gym
+
     import rolling_env  # noqa: F401  (registers the env)
+
     F = -0.9 * 0.2 * 0.2
     env = gym.make("rolling_env:RollingDrive-v0", runner_mass=0.0, F_ext=F, N_min=0.2, mu=0.2)
     env.reset(seed=0)
@@ -803,11 +939,13 @@ def test_free_runner_rings_at_the_contact_frequency_without_damping():
     sqrt(v*^2 + T^2 / (k m)), within 1% of the start (measured 2e-5): the step neither damps
     nor detunes it (backward Euler's numerical damping ratio there is 0.18)."""
     from rolling_env.scenes import load_scene
+
     sc = load_scene("light_stiff")
     p = DriveParams(sc.R, sc.E_star, sc.G_star, m=sc.runner_mass)
     a = math.sqrt(sc.R * (3 * sc.N_max / (4 * sc.E_star * math.sqrt(sc.R))) ** (2 / 3))
-    drv = Drive(p, a_ref=a, resolution=sc.resolution, stroke=(-2 * a, 2 * a), a_max=a,
-                t_ref=sc.period)
+    drv = Drive(
+        p, a_ref=a, resolution=sc.resolution, stroke=(-2 * a, 2 * a), a_max=a, t_ref=sc.period
+    )
     v0 = 1e-3
     drv.reset(vstar0=v0)
     k = sc.G_star * 2 * a
@@ -821,6 +959,9 @@ def test_free_runner_rings_at_the_contact_frequency_without_damping():
     tc = t[i] - v[i] * dt / (v[i + 1] - v[i])  # crossing times, linear between samples
     f = (len(tc) - 1) / (2 * (tc[-1] - tc[0]))
     assert len(tc) >= 199 and abs(2 * math.pi * f / omega - 1) < 5e-3, (
-        f"ringing at {2 * math.pi * f:.6g} rad/s, sqrt(k/m) = {omega:.6g}")
+        f"ringing at {2 * math.pi * f:.6g} rad/s, sqrt(k/m) = {omega:.6g}"
+    )
     amp = np.sqrt(out["vstar"] ** 2 + out["T"] ** 2 / (k * sc.runner_mass))
-    assert np.max(np.abs(amp / v0 - 1)) < 1e-2, f"amplitude drifts by {np.max(np.abs(amp / v0 - 1)):.2e}"
+    assert np.max(np.abs(amp / v0 - 1)) < 1e-2, (
+        f"amplitude drifts by {np.max(np.abs(amp / v0 - 1)):.2e}"
+    )

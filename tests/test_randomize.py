@@ -1,4 +1,5 @@
 """Scenes that draw their physics per episode (scene key ``randomize``)."""
+
 from __future__ import annotations
 
 import math
@@ -60,8 +61,9 @@ def test_an_episode_runs_the_drawn_physics():
         assert np.array_equal(o1[keep], o2[keep]), k
     sc = nominal
     wear_ref = sc.mu * sc.N_max * sc.creep_max * sc.omega_R_max * sc.dt  # nominal mu
-    assert math.isclose(i1["reward_wear"], -sc.w_wear * i1["slip_work"] / wear_ref,
-                        rel_tol=1e-12, abs_tol=1e-300)
+    assert math.isclose(
+        i1["reward_wear"], -sc.w_wear * i1["slip_work"] / wear_ref, rel_tol=1e-12, abs_tol=1e-300
+    )
 
 
 def test_draws_are_seeded():
@@ -73,6 +75,7 @@ def test_draws_are_seeded():
 
 def test_baselines_design_for_the_nominal_values():
     from agents.baselines import Eq32Feedback
+
     env = rolling_env.make(FAMILY)
     env.reset(seed=1)
     ctrl = Eq32Feedback.from_env(env)
@@ -81,21 +84,25 @@ def test_baselines_design_for_the_nominal_values():
 
 def test_the_batched_envs_refuse_a_randomised_scene_and_training_takes_single_envs():
     from agents.train import choose_vec_env
+
     with pytest.raises(ValueError, match="randomize.*single envs"):
         gym.make_vec("RollingDrive-v0", num_envs=2, scene=FAMILY)
     kind, why = choose_vec_env("auto", FAMILY, 4, {}, measure=None)
     assert kind == "dummy" and "randomize" in why["chosen_by"]
 
 
-@pytest.mark.parametrize("spec,match", [
-    ({"friction": [0.1, 0.2]}, r"'friction' cannot be drawn"),
-    ({"mu": [0.4, 0.1]}, r"randomize.mu' must be finite \[low, high\]"),
-    ({"mu": [0.1]}, r"randomize.mu' must be \[low, high\]"),
-    ({"runner_mass": [0.0, 0.04]}, r"log-uniformly: low must be > 0"),
-    ({"mu": [0.3, 0.4]}, r"'mu' = 0.2 .* must lie in its randomize range"),
-    ({"mu": [0.1, "x"]}, r"randomize.mu'.*must be a number"),
-    ("mu", r"must be a mapping of key: \[low, high\]"),
-])
+@pytest.mark.parametrize(
+    "spec,match",
+    [
+        ({"friction": [0.1, 0.2]}, r"'friction' cannot be drawn"),
+        ({"mu": [0.4, 0.1]}, r"randomize.mu' must be finite \[low, high\]"),
+        ({"mu": [0.1]}, r"randomize.mu' must be \[low, high\]"),
+        ({"runner_mass": [0.0, 0.04]}, r"log-uniformly: low must be > 0"),
+        ({"mu": [0.3, 0.4]}, r"'mu' = 0.2 .* must lie in its randomize range"),
+        ({"mu": [0.1, "x"]}, r"randomize.mu'.*must be a number"),
+        ("mu", r"must be a mapping of key: \[low, high\]"),
+    ],
+)
 def test_bad_randomize_specs_are_one_line(spec, match):
     with pytest.raises(ValueError, match=match):
         load_scene("default", randomize=spec)
@@ -105,5 +112,4 @@ def test_every_corner_of_the_ranges_must_be_a_valid_scene():
     """A massless runner holds a load only below mu N_min: a load range reaching past it
     is refused at load time, not in some later episode."""
     with pytest.raises(ValueError, match=r"randomize': the draw .* invalid scene: .*F_ext"):
-        load_scene("default", runner_mass=0.0, N_min=0.1,
-                   randomize={"F_ext": [-0.05, 0.0]})
+        load_scene("default", runner_mass=0.0, N_min=0.1, randomize={"F_ext": [-0.05, 0.0]})

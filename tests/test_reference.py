@@ -5,20 +5,21 @@ erratically (about 1-3% at 100-200 springs per radius), ours smoothly.  On rando
 piecewise-constant inputs the two must agree within the naive row's discretisation error at a
 fine grid; the tolerances below are set from that (stated per assert).
 """
+
 from __future__ import annotations
 
 import math
 
+import naive
 import numpy as np
 import pytest
 
-import naive
 from rolling_env import experiments as ex
 from rolling_env.model import Drive, DriveParams
 
 GEO = ex.Geometry()
 a1 = GEO.a1
-d1 = a1 ** 2 / GEO.R
+d1 = a1**2 / GEO.R
 
 
 def _random_ticks(seed, k=24):
@@ -32,8 +33,9 @@ def _random_ticks(seed, k=24):
 
 def _ours(params, d, u, v, dt, vstar, res=128, n_sub=40):
     c_reach = np.abs(u).sum() * dt
-    drv = Drive(params, a_ref=a1, resolution=res, stroke=(-c_reach, c_reach), a_max=a1,
-                t_ref=GEO.tau)
+    drv = Drive(
+        params, a_ref=a1, resolution=res, stroke=(-c_reach, c_reach), a_max=a1, t_ref=GEO.tau
+    )
     drv.reset()
     return drv.run(dt_tick=dt, n_sub=n_sub, omega_R=u, v=v, d=d, vstar=vstar)
 
@@ -41,10 +43,23 @@ def _ours(params, d, u, v, dt, vstar, res=128, n_sub=40):
 def _naive(params, d, u, v, dt, vstar, per_a=400, n_sub=40):
     c_reach = np.abs(u).sum() * dt + 2 * a1
     vstar = np.zeros_like(d) if vstar is None else vstar
-    return naive.naive_run(R=params.R, E_star=params.E_star, G_star=params.G_star, mu=params.mu,
-                           m=params.m, F_ext=params.F_ext, x_lo=-c_reach, x_hi=c_reach,
-                           dx=a1 / per_a, d=d, omegaR=u, v=v, vstar=vstar, dt_tick=dt,
-                           n_sub=n_sub)
+    return naive.naive_run(
+        R=params.R,
+        E_star=params.E_star,
+        G_star=params.G_star,
+        mu=params.mu,
+        m=params.m,
+        F_ext=params.F_ext,
+        x_lo=-c_reach,
+        x_hi=c_reach,
+        dx=a1 / per_a,
+        d=d,
+        omegaR=u,
+        v=v,
+        vstar=vstar,
+        dt_tick=dt,
+        n_sub=n_sub,
+    )
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -60,10 +75,13 @@ def test_prescribed_runner_infinite_friction_random_inputs(seed):
     a_fine = _ours(p, d, u, v, dt, vstar, res=512, n_sub=80)["impulse"]
     scale = np.max(np.abs(a_fine))
     assert np.max(np.abs(a - a_fine)) < 1e-4 * scale, "our kernel is not grid-converged"
-    gaps = [np.max(np.abs(_naive(p, d, u, v, dt, vstar, per_a=k, n_sub=n)["impulse"] - a_fine))
-            / scale for k, n in ((200, 20), (400, 40))]
+    gaps = [
+        np.max(np.abs(_naive(p, d, u, v, dt, vstar, per_a=k, n_sub=n)["impulse"] - a_fine)) / scale
+        for k, n in ((200, 20), (400, 40))
+    ]
     assert gaps[1] < 0.65 * gaps[0] and gaps[1] < 4e-2, (
-        f"naive row does not converge to our solution: gaps {gaps} (seed {seed})")
+        f"naive row does not converge to our solution: gaps {gaps} (seed {seed})"
+    )
 
 
 @pytest.mark.parametrize("seed,mu,m", [(3, 0.3, 1e-3), (4, 0.1, 1e-2), (5, math.inf, 1e-3)])

@@ -1,4 +1,5 @@
 """Residual agents: a policy's action added to an Eq. 32 baseline's (agents.residual)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -8,8 +9,7 @@ import yaml
 import rolling_env
 from agents.baselines import Eq32Feedback, Eq32OpenLoop
 from agents.evaluate import load_agent
-from agents.residual import (BASES, ResidualAgent, ResidualVecEnv, augment, check_residual,
-                             combine)
+from agents.residual import BASES, ResidualAgent, ResidualVecEnv, augment, check_residual, combine
 from rolling_env.rollout import rollout
 
 
@@ -39,10 +39,15 @@ def test_combine_adds_the_scaled_policy_and_clips_to_the_action_box():
     assert combine(base, np.array([[1.0, 1.0, 1.0]]), 2.0).max() <= 1.0
 
 
-@pytest.mark.parametrize("base,scale,name", [("pid", 0.25, "residual"),
-                                             ("eq32-feedback", 0.0, "residual_scale"),
-                                             ("eq32-feedback", 3.0, "residual_scale"),
-                                             ("eq32-feedback", True, "residual_scale")])
+@pytest.mark.parametrize(
+    "base,scale,name",
+    [
+        ("pid", 0.25, "residual"),
+        ("eq32-feedback", 0.0, "residual_scale"),
+        ("eq32-feedback", 3.0, "residual_scale"),
+        ("eq32-feedback", True, "residual_scale"),
+    ],
+)
 def test_bad_residual_settings_name_the_parameter(base, scale, name):
     with pytest.raises(ValueError, match=name):
         check_residual(base, scale)
@@ -61,8 +66,9 @@ def test_a_zero_policy_is_its_baseline(base):
     assert np.array_equal(_actions(got), _actions(ref)), f"{base}: actions differ"
     assert got["final_error"] == ref["final_error"]
     seen = np.concatenate([s.reshape(-1, 16) for s in policy.seen])
-    assert np.array_equal(seen[:, 13:], _actions(ref)[:len(seen)]), \
+    assert np.array_equal(seen[:, 13:], _actions(ref)[: len(seen)]), (
         "the policy's observation ends with the baseline's action of the same tick"
+    )
 
 
 def test_a_constant_residual_moves_the_actions_by_scale_times_it():
@@ -80,9 +86,11 @@ def test_residual_vec_env_with_zero_actions_runs_the_baseline_across_episode_end
     same-step autoreset; a finished env's terminal observation carries the baseline's action
     too (16 numbers), and the baseline restarts its plan on the new episode."""
     from rolling_env.sb3_vec import RollingDriveVecEnv
+
     steps = 600  # one episode end (512 ticks)
-    venv = ResidualVecEnv(RollingDriveVecEnv(2, scene="default", episode_steps=256),
-                          "eq32-feedback", 0.25)
+    venv = ResidualVecEnv(
+        RollingDriveVecEnv(2, scene="default", episode_steps=256), "eq32-feedback", 0.25
+    )
     venv.seed(5)
     ref_env = RollingDriveVecEnv(2, scene="default", episode_steps=256)
     ref_env.seed(5)
@@ -107,18 +115,42 @@ def test_residual_vec_env_with_zero_actions_runs_the_baseline_across_episode_end
 
 def test_residual_hyperparameters_are_checked(tmp_path, capsys):
     from agents.train import main as train_main
+
     conf = tmp_path / "hp.yml"
-    conf.write_text(yaml.safe_dump({"RollingDrive-v0": {
-        "n_timesteps": 64, "n_envs": 1, "n_steps": 64, "batch_size": 64,
-        "residual_scale": 0.5}}))
-    rc = train_main(["--algo", "ppo", "--conf", str(conf), "--no-progress",
-                     "--run-dir", str(tmp_path / "run")])
+    conf.write_text(
+        yaml.safe_dump(
+            {
+                "RollingDrive-v0": {
+                    "n_timesteps": 64,
+                    "n_envs": 1,
+                    "n_steps": 64,
+                    "batch_size": 64,
+                    "residual_scale": 0.5,
+                }
+            }
+        )
+    )
+    rc = train_main(
+        ["--algo", "ppo", "--conf", str(conf), "--no-progress", "--run-dir", str(tmp_path / "run")]
+    )
     err = capsys.readouterr().err
     assert rc == 2 and "residual_scale" in err and "needs 'residual'" in err, err
     assert not (tmp_path / "run").exists()
-    rc = train_main(["--algo", "ppo", "--conf", str(conf), "--no-progress", "--residual",
-                     "eq32-feedback", "--residual-scale", "5", "--run-dir",
-                     str(tmp_path / "run")])
+    rc = train_main(
+        [
+            "--algo",
+            "ppo",
+            "--conf",
+            str(conf),
+            "--no-progress",
+            "--residual",
+            "eq32-feedback",
+            "--residual-scale",
+            "5",
+            "--run-dir",
+            str(tmp_path / "run"),
+        ]
+    )
     err = capsys.readouterr().err
     assert rc == 2 and "residual_scale must be a number in (0, 2]" in err, err
 
@@ -127,11 +159,34 @@ def test_a_trained_residual_run_loads_as_a_residual_agent(tmp_path, monkeypatch)
     """agents.train --residual: the run folder is named <algo>-residual_seed<N>, its config
     names the baseline, and load_agent gives back an agent that acts through it."""
     from agents.train import main as train_main
+
     monkeypatch.chdir(tmp_path)
-    assert train_main(["--algo", "ppo", "--scene", "default", "--seed", "2", "--n-timesteps",
-                       "256", "--n-envs", "2", "--eval-freq", "256", "--eval-episodes", "1",
-                       "--no-progress", "--residual", "eq32-feedback",
-                       "--residual-scale", "0.1"]) == 0
+    assert (
+        train_main(
+            [
+                "--algo",
+                "ppo",
+                "--scene",
+                "default",
+                "--seed",
+                "2",
+                "--n-timesteps",
+                "256",
+                "--n-envs",
+                "2",
+                "--eval-freq",
+                "256",
+                "--eval-episodes",
+                "1",
+                "--no-progress",
+                "--residual",
+                "eq32-feedback",
+                "--residual-scale",
+                "0.1",
+            ]
+        )
+        == 0
+    )
     run = tmp_path / "runs" / "default" / "ppo-residual_seed2"
     cfg = yaml.safe_load((run / "config.yml").read_text())
     assert cfg["residual"] == "eq32-feedback" and cfg["residual_scale"] == 0.1
@@ -145,6 +200,7 @@ def test_a_trained_residual_run_loads_as_a_residual_agent(tmp_path, monkeypatch)
     assert np.isfinite(data["final_error"])
     # without its config.yml a residual model cannot be told from a plain one: refused, named
     import shutil
+
     alone = tmp_path / "alone"
     alone.mkdir()
     for f in ("model.zip", "model_vecnormalize.pkl"):

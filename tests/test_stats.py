@@ -1,4 +1,5 @@
 """Statistics over seeds and targets (agents.stats, rliable)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -14,32 +15,49 @@ EPISODES = 20
 def _row(controller, errors_tol, slip_nj, steps=1000):
     errors = np.asarray(errors_tol, float) * TOL
     slip = np.broadcast_to(np.asarray(slip_nj, float) * 1e-9, errors.shape)
-    return {"scene": "s", "controller": controller, "tolerance": TOL,
-            "final_abs_error_mean": float(errors.mean()), "slip_work_mean": float(slip.mean()),
-            "episode_final_abs_error": errors.tolist(), "episode_slip_work": slip.tolist(),
-            "config_key": "cfg" if "_seed" in controller else None,
-            "model_file": "model.zip" if "_seed" in controller else "-",
-            "train_env_steps": steps if "_seed" in controller else 0}
+    return {
+        "scene": "s",
+        "controller": controller,
+        "tolerance": TOL,
+        "final_abs_error_mean": float(errors.mean()),
+        "slip_work_mean": float(slip.mean()),
+        "episode_final_abs_error": errors.tolist(),
+        "episode_slip_work": slip.tolist(),
+        "config_key": "cfg" if "_seed" in controller else None,
+        "model_file": "model.zip" if "_seed" in controller else "-",
+        "train_env_steps": steps if "_seed" in controller else 0,
+    }
 
 
 @pytest.fixture(scope="module")
 def table():
     rng = np.random.default_rng(0)
-    rows = [_row("eq32-open-loop", np.full(EPISODES, 2.0), 10.0),
-            _row("eq32-feedback", np.full(EPISODES, 1.0), 20.0)]
+    rows = [
+        _row("eq32-open-loop", np.full(EPISODES, 2.0), 10.0),
+        _row("eq32-feedback", np.full(EPISODES, 1.0), 20.0),
+    ]
     rows += [_row(f"good_seed{k}", 0.2 + 0.01 * rng.random(EPISODES), 15.0) for k in range(5)]
     rows += [_row(f"coin_seed{k}", rng.uniform(0.5, 1.5, EPISODES), 15.0) for k in range(5)]
     # four good seeds and one that fails: still holds (4 of 5) if the interval stays low
-    rows += [_row(f"mixed_seed{k}", np.full(EPISODES, 0.1 if k < 4 else 3.0), 15.0)
-             for k in range(5)]
+    rows += [
+        _row(f"mixed_seed{k}", np.full(EPISODES, 0.1 if k < 4 else 3.0), 15.0) for k in range(5)
+    ]
     return rows, {s["config"]: s for s in seed_statistics(rows, reps=500, reps_poi=100)}
 
 
 def test_iqm_is_the_interquartile_mean_over_runs_and_targets(table):
     rows, st = table
     for name in ("good", "coin", "mixed"):
-        scores = np.concatenate([r["episode_final_abs_error"] for r in rows
-                                 if r["controller"].startswith(name + "_")]) / TOL
+        scores = (
+            np.concatenate(
+                [
+                    r["episode_final_abs_error"]
+                    for r in rows
+                    if r["controller"].startswith(name + "_")
+                ]
+            )
+            / TOL
+        )
         want = sps.trim_mean(scores, 0.25)
         s = st[name]
         assert abs(s["iqm_error"] - want) <= 1e-9 * want, (name, s["iqm_error"], want)

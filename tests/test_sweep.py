@@ -3,6 +3,7 @@
 The sweep file checks run without Ray; the sweeps themselves are skipped where Ray (the
 ``sweep`` extra) is not installed.  Ray's temporary files go under pytest's own.
 """
+
 from __future__ import annotations
 
 import json
@@ -31,9 +32,17 @@ def _write(path: Path, cfg: dict) -> Path:
 
 
 def _grid(tmp_path, **kw) -> dict:
-    return {"kind": "grid", "name": "g", "scenes": ["default"], "algos": ["ppo"],
-            "seeds": [0, 1], "runs": str(tmp_path / "runs"), "storage": str(tmp_path / "state"),
-            **TINY, **kw}
+    return {
+        "kind": "grid",
+        "name": "g",
+        "scenes": ["default"],
+        "algos": ["ppo"],
+        "seeds": [0, 1],
+        "runs": str(tmp_path / "runs"),
+        "storage": str(tmp_path / "state"),
+        **TINY,
+        **kw,
+    }
 
 
 @pytest.fixture(scope="module")
@@ -47,9 +56,15 @@ def _sweep(tmp_path, config: Path, *extra, ray_tmp=None, timeout=240):
     env = dict(os.environ, **({"RAY_TMPDIR": str(ray_tmp)} if ray_tmp else {}))
     if "--address" in extra:
         env = _joined(env)
-    return subprocess.run([sys.executable, "-m", "agents.sweep", "--config", str(config),
-                           *extra], cwd=tmp_path, env=env, capture_output=True, text=True,
-                          timeout=timeout, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "agents.sweep", "--config", str(config), *extra],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -60,10 +75,25 @@ def ray_head(ray_tmp):
     with socket.socket() as sock:  # a free port: another Ray may hold the default one
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
-    head = subprocess.Popen([str(Path(sys.executable).parent / "ray"), "start", "--head",
-                             "--block", "--port", str(port), "--num-cpus", "2",
-                             "--include-dashboard", "false", "--temp-dir", str(ray_tmp)],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    head = subprocess.Popen(
+        [
+            str(Path(sys.executable).parent / "ray"),
+            "start",
+            "--head",
+            "--block",
+            "--port",
+            str(port),
+            "--num-cpus",
+            "2",
+            "--include-dashboard",
+            "false",
+            "--temp-dir",
+            str(ray_tmp),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     address = None
     for line in head.stdout:
         m = re.search(r"--address='([^']+)'", line)
@@ -96,25 +126,35 @@ BAD = {
     "seed of the wrong type": ({"seeds": ["zero"]}, "'seeds'"),
     "budget of the wrong type": ({"n_timesteps": "many"}, "'n_timesteps'"),
     "negative failures": ({"max_failures": -1}, "'max_failures'"),
-    "configuration without algo": ({"configs": {"wide": {"conf": "x.yml"}}},
-                                    "'configs.wide'"),
-    "configuration key": ({"configs": {"wide": {"algo": "ppo", "cnf": "x.yml"}}},
-                          "'configs.wide.cnf'"),
-    "bad hyper-parameter file": ({"configs": {"wide": {"algo": "ppo", "conf": "none.yml"}}},
-                                 "'configs.wide'"),
+    "configuration without algo": ({"configs": {"wide": {"conf": "x.yml"}}}, "'configs.wide'"),
+    "configuration key": (
+        {"configs": {"wide": {"algo": "ppo", "cnf": "x.yml"}}},
+        "'configs.wide.cnf'",
+    ),
+    "bad hyper-parameter file": (
+        {"configs": {"wide": {"algo": "ppo", "conf": "none.yml"}}},
+        "'configs.wide'",
+    ),
     "kind": ({"kind": "grids"}, "'kind'"),
 }
-SEARCH = {"kind": "search", "name": "s", "scene": "default", "algo": "ppo", "trials": 3,
-          "space": {"learning_rate": {"loguniform": [1.0e-4, 1.0e-3]}}, "output": "best.yml",
-          **TINY}
+SEARCH = {
+    "kind": "search",
+    "name": "s",
+    "scene": "default",
+    "algo": "ppo",
+    "trials": 3,
+    "space": {"learning_rate": {"loguniform": [1.0e-4, 1.0e-3]}},
+    "output": "best.yml",
+    **TINY,
+}
 BAD_SEARCH = {
-    "unknown hyper-parameter": ({"space": {"learning_rat": {"uniform": [0.1, 0.2]}}},
-                                "'space.learning_rat'"),
-    "range outside the checks": ({"space": {"gamma": {"uniform": [0.9, 1.5]}}},
-                                 "'space.gamma'"),
+    "unknown hyper-parameter": (
+        {"space": {"learning_rat": {"uniform": [0.1, 0.2]}}},
+        "'space.learning_rat'",
+    ),
+    "range outside the checks": ({"space": {"gamma": {"uniform": [0.9, 1.5]}}}, "'space.gamma'"),
     "unknown distribution": ({"space": {"gamma": {"normal": [0.9, 0.99]}}}, "'space.gamma'"),
-    "searched budget": ({"space": {"n_timesteps": {"int": [1000, 2000]}}},
-                        "'space.n_timesteps'"),
+    "searched budget": ({"space": {"n_timesteps": {"int": [1000, 2000]}}}, "'space.n_timesteps'"),
     "grid key in a search": ({"seeds": [0, 1]}, "'seeds'"),
     "no output": ({"output": None}, "'output'"),
     "no evaluation within the budget": ({"eval_freq": 10**6}, "'eval_freq'"),
@@ -123,8 +163,10 @@ BAD_SEARCH = {
 
 def _refused(tmp_path, cfg, capsys, monkeypatch, *extra):
     """main's exit code and stderr, with Ray made impossible to start."""
+
     def no_ray(*a, **k):
         raise AssertionError("Ray was started for a bad sweep file")
+
     monkeypatch.setattr(S, "_start_ray", no_ray)
     monkeypatch.chdir(tmp_path)
     code = S.main(["--config", str(_write(tmp_path / "sweep.yml", cfg)), *extra])
@@ -150,8 +192,7 @@ def test_bad_search_file_is_one_line_naming_the_key(case, tmp_path, capsys, monk
     assert len(err.strip().splitlines()) == 1 and key in err, err
 
 
-def test_start_refuses_occupied_run_folders_and_resume_needs_a_sweep(tmp_path, capsys,
-                                                                     monkeypatch):
+def test_start_refuses_occupied_run_folders_and_resume_needs_a_sweep(tmp_path, capsys, monkeypatch):
     """A new grid does not train into a run folder that holds files; --resume without a
     saved sweep is refused; both before Ray starts."""
     cfg = _grid(tmp_path)
@@ -165,15 +206,23 @@ def test_start_refuses_occupied_run_folders_and_resume_needs_a_sweep(tmp_path, c
 
 def test_grid_trials_and_run_folders_follow_agents_train(tmp_path):
     """scenes x agents x seeds, named configurations included, in agents.train's layout."""
-    conf = _write(tmp_path / "wide.yml", {"RollingDrive-v0": {
-        "n_envs": 2, "n_timesteps": 4096, "n_steps": 64, "batch_size": 64}})
-    cfg = _grid(tmp_path, scenes=["default", "loaded"],
-                configs={"ppo_wide": {"algo": "ppo", "conf": str(conf)}})
+    conf = _write(
+        tmp_path / "wide.yml",
+        {"RollingDrive-v0": {"n_envs": 2, "n_timesteps": 4096, "n_steps": 64, "batch_size": 64}},
+    )
+    cfg = _grid(
+        tmp_path,
+        scenes=["default", "loaded"],
+        configs={"ppo_wide": {"algo": "ppo", "conf": str(conf)}},
+    )
     sweep = S.load_sweep(_write(tmp_path / "sweep.yml", cfg))
     trials = S.grid_trials(sweep)
     assert [t["label"] for t in trials] == [
-        f"{s}/{a}_seed{n}" for s in ("default", "loaded") for a in ("ppo", "ppo_wide")
-        for n in (0, 1)]
+        f"{s}/{a}_seed{n}"
+        for s in ("default", "loaded")
+        for a in ("ppo", "ppo_wide")
+        for n in (0, 1)
+    ]
     assert trials[2]["run_dir"] == str(tmp_path / "runs" / "default" / "ppo_wide_seed0")
     assert trials[2]["conf"] == str(conf) and trials[2]["algo"] == "ppo"
 
@@ -184,7 +233,7 @@ SHIPPED = sorted(p.name for p in (REPO / "configs" / "sweeps").glob("*.yml"))
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_sweep_files_pass_the_checks(name):
     sweep = S.load_sweep(REPO / "configs" / "sweeps" / name)
-    assert (S.grid_trials(sweep) if sweep["kind"] == "grid" else sweep["trials"])
+    assert S.grid_trials(sweep) if sweep["kind"] == "grid" else sweep["trials"]
 
 
 # ------------------------------------------------------------------ sweeps on Ray
@@ -196,6 +245,7 @@ def test_grid_sweep_writes_runs_that_agents_evaluate_reads(tmp_path, ray_tmp):
     pytest.importorskip("ray.tune")
     import rolling_env
     from agents.evaluate import controllers_for
+
     out = _sweep(tmp_path, _write(tmp_path / "grid.yml", _grid(tmp_path)), ray_tmp=ray_tmp)
     assert out.returncode == 0, out.stdout + out.stderr
     for seed in (0, 1):
@@ -203,8 +253,11 @@ def test_grid_sweep_writes_runs_that_agents_evaluate_reads(tmp_path, ray_tmp):
         meta = json.loads((run / "meta.json").read_text())
         assert meta["env_steps"] >= TINY["n_timesteps"] and meta["interrupted"] is False
         assert meta["threads"]["NUMBA_NUM_THREADS"] == "1", meta["threads"]
-        assert (run / "command.txt").read_text().startswith("python -m agents.train --algo "
-                                                            "ppo --scene default --seed")
+        assert (
+            (run / "command.txt")
+            .read_text()
+            .startswith("python -m agents.train --algo ppo --scene default --seed")
+        )
         assert f"default/ppo_seed{seed}" in out.stdout  # the summary table
     # what agents.evaluate does before any episode: find, check and load every run
     ctrls = controllers_for("default", tmp_path / "runs", rolling_env.make("default"))
@@ -212,21 +265,26 @@ def test_grid_sweep_writes_runs_that_agents_evaluate_reads(tmp_path, ray_tmp):
         assert ctrls[f"ppo_seed{seed}"].file == "model.zip", sorted(ctrls)
 
 
-def test_interrupted_sweep_resumes_without_retraining_finished_trials(tmp_path, ray_head,
-                                                                     ray_tmp):
+def test_interrupted_sweep_resumes_without_retraining_finished_trials(tmp_path, ray_head, ray_tmp):
     """A two-trial grid on a cluster (--address), stopped by SIGTERM after the first trial
     finished, while the second trains: exit 143 with the state saved.  --resume, here on a
     local Ray instance (the default), trains only the second trial, from scratch in its run
     folder, and leaves the first run's files untouched; agents.evaluate loads both runs."""
     import rolling_env
     from agents.evaluate import controllers_for
+
     cfg = _grid(tmp_path, max_concurrent=1, n_timesteps=8192)
     config = _write(tmp_path / "grid.yml", cfg)
     first = tmp_path / "runs" / "default" / "ppo_seed0"
     second = tmp_path / "runs" / "default" / "ppo_seed1"
-    proc = subprocess.Popen([sys.executable, "-m", "agents.sweep", "--config", str(config),
-                             "--address", ray_head], cwd=tmp_path, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, env=_joined())
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "agents.sweep", "--config", str(config), "--address", ray_head],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=_joined(),
+    )
     lines = []
     try:
         for line in proc.stdout:
@@ -244,19 +302,22 @@ def test_interrupted_sweep_resumes_without_retraining_finished_trials(tmp_path, 
     assert proc.returncode == 143, text
     assert (first / "model.zip").is_file() and not (second / "model.zip").exists(), text
     assert (second / "config.yml").is_file(), "the second trial had started training"
-    kept = {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in first.iterdir()
-            if p.is_file()}
+    kept = {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in first.iterdir() if p.is_file()}
     out = _sweep(tmp_path, config, "--resume", ray_tmp=ray_tmp)
     assert out.returncode == 0, out.stdout + out.stderr
     assert "default/ppo_seed0 finished" not in out.stdout, "the finished trial ran again"
     assert "default/ppo_seed1 finished" in out.stdout, out.stdout
-    assert {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in first.iterdir()
-            if p.is_file()} == kept, "the finished run's files changed"
+    assert {
+        p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in first.iterdir() if p.is_file()
+    } == kept, "the finished run's files changed"
     meta = json.loads((second / "meta.json").read_text())
     assert meta["interrupted"] is False and meta["env_steps"] >= 8192
     assert meta["threads"]["NUMBA_NUM_THREADS"] == "1", meta["threads"]
-    assert (second / "command.txt").read_text().startswith(
-        "python -m agents.train --algo ppo --scene default --seed 1")
+    assert (
+        (second / "command.txt")
+        .read_text()
+        .startswith("python -m agents.train --algo ppo --scene default --seed 1")
+    )
     assert "2 of 2 trials finished" in out.stdout, out.stdout
     ctrls = controllers_for("default", tmp_path / "runs", rolling_env.make("default"))
     assert {ctrls[f"ppo_seed{n}"].file for n in (0, 1)} == {"model.zip"}, sorted(ctrls)
@@ -267,21 +328,51 @@ def test_search_writes_a_best_entry_that_agents_train_trains(tmp_path, ray_head)
     to the output file (RL Zoo format, keyed by scene) and trains with agents.train."""
     pytest.importorskip("optuna")
     from agents.train import main as train_main
+
     best = tmp_path / "tuned" / "ppo.yml"
-    cfg = dict(SEARCH, storage=str(tmp_path / "state"), output=str(best), eval_freq=2048,
-               grace_period=2048, reduction_factor=2, max_concurrent=2,
-               space={"learning_rate": {"loguniform": [1.0e-4, 1.0e-3]},
-                      "n_epochs": {"int": [2, 5]}, "gamma": {"choice": [0.98, 0.995]}})
+    cfg = dict(
+        SEARCH,
+        storage=str(tmp_path / "state"),
+        output=str(best),
+        eval_freq=2048,
+        grace_period=2048,
+        reduction_factor=2,
+        max_concurrent=2,
+        space={
+            "learning_rate": {"loguniform": [1.0e-4, 1.0e-3]},
+            "n_epochs": {"int": [2, 5]},
+            "gamma": {"choice": [0.98, 0.995]},
+        },
+    )
     out = _sweep(tmp_path, _write(tmp_path / "search.yml", cfg), "--address", ray_head)
     assert out.returncode == 0, out.stdout + out.stderr
     table = yaml.safe_load(best.read_text())
     entry = table["default"]
     assert 1e-4 <= entry["learning_rate"] <= 1e-3 and 2 <= entry["n_epochs"] <= 5
     assert entry["gamma"] in (0.98, 0.995) and entry["n_steps"] == 256  # the base entry's
-    tried = [yaml.safe_load(p.read_text())["default"]
-             for p in (tmp_path / "state" / "s" / "trials").glob("*.hyperparams.yml")]
+    tried = [
+        yaml.safe_load(p.read_text())["default"]
+        for p in (tmp_path / "state" / "s" / "trials").glob("*.hyperparams.yml")
+    ]
     assert len(tried) == 3 and entry in tried, "the entry is one that a trial trained"
-    assert train_main(["--algo", "ppo", "--scene", "default", "--conf", str(best),
-                       "--n-timesteps", "2048", "--eval-freq", "100000", "--no-progress",
-                       "--run-dir", str(tmp_path / "check")]) == 0
+    assert (
+        train_main(
+            [
+                "--algo",
+                "ppo",
+                "--scene",
+                "default",
+                "--conf",
+                str(best),
+                "--n-timesteps",
+                "2048",
+                "--eval-freq",
+                "100000",
+                "--no-progress",
+                "--run-dir",
+                str(tmp_path / "check"),
+            ]
+        )
+        == 0
+    )
     assert (tmp_path / "check" / "model.zip").is_file()

@@ -2,6 +2,7 @@
 kernel (``ThreadPolicy``, driven here by a fake clock: no timed asserts), bit-identical
 transitions whichever kernel runs, the ``num_threads`` argument, and the training script's
 choice of vector env."""
+
 from __future__ import annotations
 
 import json
@@ -14,8 +15,14 @@ import pytest
 
 import rolling_env  # noqa: F401  (registers RollingDrive-v0)
 import rolling_env._envkernel as EK
-from rolling_env.vector import (PARALLEL_MIN_ENVS, BatchCore, RollingDriveVecEnv, ThreadPolicy,
-                                max_threads, thread_choices)
+from rolling_env.vector import (
+    PARALLEL_MIN_ENVS,
+    BatchCore,
+    RollingDriveVecEnv,
+    ThreadPolicy,
+    max_threads,
+    thread_choices,
+)
 
 THREADS = min(2, max_threads())
 two_threads = pytest.mark.skipif(max_threads() < 2, reason="numba runs one thread here")
@@ -73,7 +80,7 @@ def test_policy_drops_a_far_slower_choice_after_one_timed_step():
     p = ThreadPolicy((1, 2), clock=clock)
     picks, extra = _drive(p, clock, 30_000, lambda i, k: (1e-4, 1e-2)[i], gap_s=0.0)
     runs = [k for k in range(1, len(picks)) if picks[k] == 1 and picks[k - 1] == 0]
-    assert picks[runs[0]:runs[0] + 3] == [1, 1, 0], picks[runs[0]:runs[0] + 6]
+    assert picks[runs[0] : runs[0] + 3] == [1, 1, 0], picks[runs[0] : runs[0] + 6]
     assert 2 <= len(runs) <= 4 and np.all(np.diff(runs) > 5000), runs
     assert extra <= 1.5 * ThreadPolicy.BUDGET * 30_000 * 1e-4 + 2e-2, extra
     assert p.threads == 1
@@ -117,13 +124,14 @@ def test_policy_follows_a_change_of_load():
     def cost(i, k):
         busy = 1000 <= k < 3000
         return (1e-3, 4e-3 if busy else 0.5e-3)[i]
+
     picks, _ = _drive(p, clock, 7000, cost)
     assert picks[900:1000].count(1) > 90, "threads win on the idle host"
     assert picks[1100:3000].count(0) > 1800, "serial on the busy host"
-    back = next(k for k in range(1000, 3000) if picks[k:k + 20].count(0) == 20)
+    back = next(k for k in range(1000, 3000) if picks[k : k + 20].count(0) == 20)
     assert back < 1050, f"took {back - 1000} steps to leave the slowed threads"
     # found again at the next probe, which the budget spaces by what the last one cost
-    again = next(k for k in range(3000, 7000) if picks[k:k + 100].count(1) > 95)
+    again = next(k for k in range(3000, 7000) if picks[k : k + 100].count(1) > 95)
     assert again < 3000 + 3000, again
     assert picks[-1000:].count(1) > 950, "threads again once the load is gone"
 
@@ -154,6 +162,7 @@ def test_policy_counts_stalls_of_a_waiting_thread():
 
     def cost(i, k):
         return 1e-3 if i == 0 else (12e-3 if stall[k] else 0.6e-3)
+
     picks, _ = _drive(p, clock, 4000, cost)
     assert p.threads == 1
     assert picks[1000:].count(1) < 0.03 * 3000, picks[1000:].count(1)
@@ -174,6 +183,7 @@ def _counted(fn, counter, key, clock=None, cost=0.0):
         if clock is not None:
             clock.t += cost
         return fn(*args)
+
     return run
 
 
@@ -188,8 +198,10 @@ def test_batch_runs_the_serial_kernel_when_a_forced_calibration_says_threads_los
     clock = FakeClock()
     p.clock = clock
     ran = {}
-    p._kernels = [_counted(p._kernels[0], ran, 1, clock, 1e-3),
-                  _counted(p._kernels[1], ran, 2, clock, 5e-3)]
+    p._kernels = [
+        _counted(p._kernels[0], ran, 1, clock, 1e-3),
+        _counted(p._kernels[1], ran, 2, clock, 5e-3),
+    ]
     for c in (core, ref):
         c.seed(4)
         c.reset()
@@ -271,15 +283,18 @@ BAD = [0, -1, 10**6, 1.5, 2.0, "2", True, np.float64(2.0), [2]]
 @pytest.mark.parametrize("make", ["core", "make_vec", "sb3"])
 def test_num_threads_is_checked(make, bad):
     """A bad num_threads is one ValueError line naming the parameter and the range."""
-    build = {"core": lambda: BatchCore(8, num_threads=bad),
-             "make_vec": lambda: gym.make_vec("RollingDrive-v0", num_envs=8, num_threads=bad),
-             "sb3": lambda: RollingDriveVecEnv(8, num_threads=bad)}[make]
+    build = {
+        "core": lambda: BatchCore(8, num_threads=bad),
+        "make_vec": lambda: gym.make_vec("RollingDrive-v0", num_envs=8, num_threads=bad),
+        "sb3": lambda: RollingDriveVecEnv(8, num_threads=bad),
+    }[make]
     with pytest.raises(ValueError) as e:
         build()
     msg = str(e.value)
     assert "\n" not in msg
-    assert msg.startswith(f"num_threads must be None (chosen at run time) or an integer in "
-                          f"[1, {max_threads()}]"), msg
+    assert msg.startswith(
+        f"num_threads must be None (chosen at run time) or an integer in [1, {max_threads()}]"
+    ), msg
     assert msg.endswith(f"got {bad!r}"), msg
 
 
@@ -301,6 +316,7 @@ def test_make_vec_env_kinds_give_the_same_transitions():
     """The batched env and the DummyVecEnv of single envs that agents.train chooses between
     step identically (same seeds, rewards, episode ends and terminal observations)."""
     from agents.common import make_vec_env
+
     kw = {"max_episode_steps": 20}
     a = make_vec_env("default", 3, 5, kw, kind="batched")
     b = make_vec_env("default", 3, 5, kw, kind="dummy")
@@ -317,19 +333,26 @@ def test_make_vec_env_kinds_give_the_same_transitions():
         make_vec_env("default", 1, 0, kind="subproc")
 
 
-@pytest.mark.parametrize("rates,want", [({"batched": 5e4, "dummy": 2e4}, "batched"),
-                                        ({"batched": 1e4, "dummy": 2e4}, "dummy")])
+@pytest.mark.parametrize(
+    "rates,want",
+    [({"batched": 5e4, "dummy": 2e4}, "batched"), ({"batched": 1e4, "dummy": 2e4}, "dummy")],
+)
 def test_train_takes_the_faster_vector_env(rates, want):
     from agents.train import choose_vec_env
+
     seen = []
 
     def measure(scene, n_envs, env_kwargs, num_threads):
         seen.append((scene, n_envs, num_threads))
         return rates
+
     kind, record = choose_vec_env("auto", "default", 8, {}, None, measure=measure)
     assert kind == want and seen == [("default", 8, None)]
-    assert record == {"kind": want, "chosen_by": "measured at start",
-                      "env_steps_per_s": {k: round(v) for k, v in rates.items()}}
+    assert record == {
+        "kind": want,
+        "chosen_by": "measured at start",
+        "env_steps_per_s": {k: round(v) for k, v in rates.items()},
+    }
 
 
 @pytest.mark.parametrize("flag", ["batched", "dummy"])
@@ -338,20 +361,26 @@ def test_train_vec_env_flag_overrides_the_measurement(flag):
 
     def measure(*a):
         raise AssertionError("measured despite --vec-env")
+
     assert choose_vec_env(flag, "default", 8, {}, None, measure=measure) == (
-        flag, {"kind": flag, "chosen_by": "--vec-env"})
+        flag,
+        {"kind": flag, "chosen_by": "--vec-env"},
+    )
 
 
 def test_train_measurement_rates_both_kinds():
     from agents.train import measure_vec_envs
+
     rates = measure_vec_envs("default", 2, {}, None, seconds=0.1, rounds=1)
     assert set(rates) == {"batched", "dummy"} and all(v > 0 for v in rates.values()), rates
 
 
-@pytest.mark.parametrize("text,want", [("auto", None), ("1", 1), (str(max_threads()),
-                                                                max_threads())])
+@pytest.mark.parametrize(
+    "text,want", [("auto", None), ("1", 1), (str(max_threads()), max_threads())]
+)
 def test_train_num_threads_flag(text, want):
     from agents.train import build_parser
+
     args = build_parser().parse_args(["--algo", "ppo", "--num-threads", text])
     assert args.num_threads == want and args.vec_env == "auto"
 
@@ -359,22 +388,42 @@ def test_train_num_threads_flag(text, want):
 @pytest.mark.parametrize("text", ["0", str(max_threads() + 1), "two", "1.5", ""])
 def test_train_refuses_a_bad_num_threads(text, capsys):
     from agents.train import build_parser
+
     with pytest.raises(SystemExit) as e:
         build_parser().parse_args(["--algo", "ppo", "--num-threads", text])
     assert e.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()[-1]
-    assert err.endswith(f"argument --num-threads: num-threads must be 'auto' or an integer in "
-                        f"[1, {max_threads()}], got {text!r}"), err
+    assert err.endswith(
+        f"argument --num-threads: num-threads must be 'auto' or an integer in "
+        f"[1, {max_threads()}], got {text!r}"
+    ), err
 
 
 def test_train_records_the_vector_env_in_meta(tmp_path):
     """--vec-env dummy trains on SB3's DummyVecEnv (no measurement) and meta.json says so,
     with the --num-threads setting."""
     from agents.train import main as train_main
+
     run = tmp_path / "run"
-    argv = ["--algo", "ppo", "--n-timesteps", "64", "--n-envs", "2", "--eval-freq", "64",
-            "--eval-episodes", "1", "--no-progress", "--run-dir", str(run),
-            "--vec-env", "dummy", "--num-threads", "1"]
+    argv = [
+        "--algo",
+        "ppo",
+        "--n-timesteps",
+        "64",
+        "--n-envs",
+        "2",
+        "--eval-freq",
+        "64",
+        "--eval-episodes",
+        "1",
+        "--no-progress",
+        "--run-dir",
+        str(run),
+        "--vec-env",
+        "dummy",
+        "--num-threads",
+        "1",
+    ]
     assert train_main(argv) == 0
     meta = json.loads((run / "meta.json").read_text())
     assert meta["vec_env"] == {"kind": "dummy", "chosen_by": "--vec-env", "num_threads": 1}

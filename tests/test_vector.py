@@ -1,4 +1,5 @@
 """The natively batched env against N single envs: bit-identical transitions."""
+
 from __future__ import annotations
 
 import re
@@ -11,16 +12,23 @@ import pytest
 
 import rolling_env
 import rolling_env._envkernel as EK
-from rolling_env.vector import (PARALLEL_MIN_ENVS, BatchCore, RollingDriveVecEnv, ThreadPolicy,
-                                max_threads)
+from rolling_env.vector import (
+    PARALLEL_MIN_ENVS,
+    BatchCore,
+    RollingDriveVecEnv,
+    ThreadPolicy,
+    max_threads,
+)
 
 STEPS = 40  # with max_episode_steps = 15: crosses two episode boundaries
 THREADS = min(2, max_threads())  # the threaded kernel's thread count in these tests
 # batch sizes and num_threads that take the serial kernel (the default below
 # ``PARALLEL_MIN_ENVS`` envs), the threaded kernel, and the default's run-time choice
-KERNELS = pytest.mark.parametrize("n,num_threads", [(3, None), (PARALLEL_MIN_ENVS, THREADS),
-                                                    (PARALLEL_MIN_ENVS, None)],
-                                  ids=["serial", "threaded", "default"])
+KERNELS = pytest.mark.parametrize(
+    "n,num_threads",
+    [(3, None), (PARALLEL_MIN_ENVS, THREADS), (PARALLEL_MIN_ENVS, None)],
+    ids=["serial", "threaded", "default"],
+)
 
 
 def _kernel_of(core, n, num_threads):
@@ -39,8 +47,14 @@ def _actions(seed, n, steps=STEPS):
 @KERNELS
 @pytest.mark.parametrize("scene", ["default", "resonant", "heavy_inf_friction", "loaded"])
 def test_gymnasium_vector_env_matches_single_envs(scene, n, num_threads):
-    venv = gym.make_vec("RollingDrive-v0", num_envs=n, vectorization_mode="vector_entry_point",
-                        scene=scene, max_episode_steps=15, num_threads=num_threads)
+    venv = gym.make_vec(
+        "RollingDrive-v0",
+        num_envs=n,
+        vectorization_mode="vector_entry_point",
+        scene=scene,
+        max_episode_steps=15,
+        num_threads=num_threads,
+    )
     _kernel_of(venv.unwrapped.core, n, num_threads)
     singles = [gym.make("RollingDrive-v0", scene=scene, max_episode_steps=15) for _ in range(n)]
     vobs, _ = venv.reset(seed=7)
@@ -108,9 +122,17 @@ def test_reset_mask_resets_only_masked():
     assert np.array_equal(core.obs[1], expect), (core.obs[1], expect)
 
 
-@pytest.mark.parametrize("mask", [[2], np.array([2]), "abc", np.array([0, 1, 0]),
-                                  np.array([False, True, False, False, True]),
-                                  np.array([[False, True, False]])])
+@pytest.mark.parametrize(
+    "mask",
+    [
+        [2],
+        np.array([2]),
+        "abc",
+        np.array([0, 1, 0]),
+        np.array([False, True, False, False, True]),
+        np.array([[False, True, False]]),
+    ],
+)
 def test_reset_mask_must_be_one_bool_per_env(mask):
     """An index list ([2], read as 'True at env 0' by flatnonzero), a string, an int array or
     a bool array of another shape reset the wrong env or half-reset one (the target drawn,
@@ -139,9 +161,11 @@ def test_parallel_kernel_equals_serial():
         assert np.array_equal(oa, ob) and np.array_equal(ra, rb)
 
 
-
-@pytest.mark.parametrize("num_envs,num_threads", [(3, 1), (70, THREADS), (70, None)],
-                         ids=["serial", "threaded", "default"])
+@pytest.mark.parametrize(
+    "num_envs,num_threads",
+    [(3, 1), (70, THREADS), (70, None)],
+    ids=["serial", "threaded", "default"],
+)
 def test_step_returns_the_kernels_reward_and_truncation_as_copies(num_envs, num_threads):
     """``BatchCore.step`` returns the reward and ``steps >= max_episode_steps`` that the kernel
     writes per env: equal to the extras' reward column and to the step counts compared in
@@ -157,7 +181,8 @@ def test_step_returns_the_kernels_reward_and_truncation_as_copies(num_envs, num_
         obs, rew, trunc = core.step(acts)
         assert np.array_equal(rew, core.extra[:, EK.X_REWARD]), f"step {k}: reward differs"
         assert np.array_equal(trunc, core.steps >= core.max_episode_steps), (
-            f"step {k}: truncation {trunc.astype(int)} vs steps {core.steps}")
+            f"step {k}: truncation {trunc.astype(int)} vs steps {core.steps}"
+        )
         assert trunc.dtype == np.bool_ and rew.dtype == np.float64
         kept.append((rew, rew.copy(), trunc, trunc.copy()))
         if k == 5:
@@ -167,6 +192,7 @@ def test_step_returns_the_kernels_reward_and_truncation_as_copies(num_envs, num_
     assert any(t.any() for _, _, t, _ in kept) and not all(t.all() for _, _, t, _ in kept)
     for k, (r, r0, t, t0) in enumerate(kept):
         assert np.array_equal(r, r0) and np.array_equal(t, t0), f"step {k}'s output changed"
+
 
 def test_bad_batch_actions_raise():
     core = BatchCore(2)
@@ -181,7 +207,10 @@ def test_sb3_trains_on_batched_env():
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_checker import check_env  # noqa: F401
     from stable_baselines3.common.vec_env import VecCheckNan, VecMonitor
-    venv = VecCheckNan(VecMonitor(RollingDriveVecEnv(8, max_episode_steps=64)), raise_exception=True)
+
+    venv = VecCheckNan(
+        VecMonitor(RollingDriveVecEnv(8, max_episode_steps=64)), raise_exception=True
+    )
     model = PPO("MlpPolicy", venv, n_steps=32, batch_size=64, n_epochs=1, seed=0, device="cpu")
     model.learn(512)
     assert model.num_timesteps >= 512
@@ -265,21 +294,27 @@ def test_per_env_names_every_array_with_an_env_axis():
     in it has length 3.  And get_attr("cells") gives each env its own rows."""
     v = RollingDriveVecEnv(3)
     core = v.core
-    names = set(vars(core)) | {k for cls in BatchCore.__mro__ for k, x in vars(cls).items()
-                              if isinstance(x, property)}
-    per_env = {k for k in names
-               if isinstance(getattr(core, k), (np.ndarray, list)) and len(getattr(core, k)) == 3}
+    names = set(vars(core)) | {
+        k for cls in BatchCore.__mro__ for k, x in vars(cls).items() if isinstance(x, property)
+    }
+    per_env = {
+        k
+        for k in names
+        if isinstance(getattr(core, k), (np.ndarray, list)) and len(getattr(core, k)) == 3
+    }
     assert per_env == set(BatchCore.PER_ENV), (
         f"per-env attributes not in PER_ENV: {sorted(per_env - BatchCore.PER_ENV)}; "
-        f"in PER_ENV but not per env: {sorted(BatchCore.PER_ENV - per_env)}")
+        f"in PER_ENV but not per env: {sorted(BatchCore.PER_ENV - per_env)}"
+    )
     cells = v.get_attr("cells", indices=[1])[0]
     assert cells.shape == core.cells.shape[1:] and np.shares_memory(cells, core.cells[1])
     with pytest.raises(AttributeError, match="read-only|per-env"):
         v.set_attr("cells", 0.0, indices=[0])
 
 
-@pytest.mark.parametrize("name,value", [("scene", "resonant"), ("num_envs", 5),
-                                        ("features", (None, None, None, None))])
+@pytest.mark.parametrize(
+    "name,value", [("scene", "resonant"), ("num_envs", 5), ("features", (None, None, None, None))]
+)
 def test_sb3_set_attr_refuses_what_is_fixed_at_construction(name, value):
     """Setting the scene (the kernel kept the old physics: trajectories stayed those of the
     old scene while get_attr reported the new one) or the batch size (arrays too short) is
@@ -330,24 +365,29 @@ def test_gymnasium_vector_infos_match_sync_mode():
     kw = dict(num_envs=3, episode_steps=6)
     ours = gym.make_vec("RollingDrive-v0", vectorization_mode="vector_entry_point", **kw)
     sync = gym.make_vec("RollingDrive-v0", vectorization_mode="sync", **kw)
+
     def same(a, b, when):
         assert set(a) == set(b), f"{when}: keys differ: {set(a) ^ set(b)}"
         for k in b:
             assert a[k].dtype == b[k].dtype and np.array_equal(a[k], b[k]), (
-                f"{when}: info[{k!r}] differs: {a[k]} vs {b[k]}")
+                f"{when}: info[{k!r}] differs: {a[k]} vs {b[k]}"
+            )
+
     same(ours.reset(seed=3)[1], sync.reset(seed=3)[1], "reset")
     for t, acts in enumerate(_actions(2, n=3, steps=14)):
         (o1, *_, a), (o2, *_, b) = ours.step(acts), sync.step(acts)
         assert np.array_equal(o1, o2)
         same(a, b, f"step {t}")
     for t, acts in enumerate(_actions(3, n=3, steps=20)):  # until every env has just ended
-        (o1, r1, te1, tr1, a), (o2, r2, te2, tr2, b) = ours.step(acts), sync.step(acts)
+        (o1, _, _, tr1, a), (o2, _, _, tr2, b) = ours.step(acts), sync.step(acts)
         if tr1.all():
             break
     assert tr1.all() and tr2.all(), "the episodes should end together (episode_steps = 6)"
     mask = np.array([False, True, False])  # Gymnasium's partial reset; envs 0, 2 stay pending
-    (o1, a), (o2, b) = (ours.reset(seed=[1, 11, 2], options={"reset_mask": mask.copy()}),
-                        sync.reset(seed=[1, 11, 2], options={"reset_mask": mask.copy()}))
+    (o1, a), (o2, b) = (
+        ours.reset(seed=[1, 11, 2], options={"reset_mask": mask.copy()}),
+        sync.reset(seed=[1, 11, 2], options={"reset_mask": mask.copy()}),
+    )
     assert np.array_equal(o1, o2), "partial reset: observations differ"
     same(a, b, "partial reset")
     for t, acts in enumerate(_actions(4, n=3, steps=8)):
@@ -378,8 +418,11 @@ def test_batch_reset_with_a_bad_option_changes_nothing():
     core = venv.unwrapped.core
     state = (core.steps.copy(), core.target.copy(), core.st.copy())
     rngs = [r.bit_generator.state for r in core.rngs]
-    for bad in ([{"target": 1e-7}, {"target": "x"}, None], [{"target": 1e-7}, {"targte": 1}, None],
-                {"target": 1.0}):
+    for bad in (
+        [{"target": 1e-7}, {"target": "x"}, None],
+        [{"target": 1e-7}, {"targte": 1}, None],
+        {"target": 1.0},
+    ):
         with pytest.raises(ValueError, match="options"):
             venv.reset(seed=5, options=bad)
         assert all(np.array_equal(x, y) for x, y in zip(state, (core.steps, core.target, core.st)))
@@ -423,8 +466,9 @@ def test_sb3_vecenv_render_mode_named():
 def test_gymnasium_vector_env_checks_the_action_shape_while_an_env_is_pending_autoreset():
     """A (3,) or (1, 3) action for 2 envs is refused on every step, also on the step where an
     env is pending autoreset (np.where broadcast it to both envs there)."""
-    venv = gym.make_vec("RollingDrive-v0", num_envs=2, episode_steps=2,
-                        vectorization_mode="vector_entry_point")
+    venv = gym.make_vec(
+        "RollingDrive-v0", num_envs=2, episode_steps=2, vectorization_mode="vector_entry_point"
+    )
     venv.reset(seed=0)
     for _ in range(2):
         venv.step(np.zeros((2, 3), np.float32))
@@ -434,14 +478,17 @@ def test_gymnasium_vector_env_checks_the_action_shape_while_an_env_is_pending_au
             venv.step(bad)
 
 
-@pytest.mark.parametrize("name,value,match", [
-    ("steps", -5, r"steps must be an integer in \[0, 511\]"),
-    ("steps", 2.5, "steps must be an integer"),
-    ("steps", 512, r"steps must be an integer in \[0, 511\]"),
-    ("rngs", 5, "rngs must be a numpy.random.Generator"),
-    ("U", 0.0, "'U' is per-env physics state, read-only"),
-    ("obs", 0.0, "'obs' is per-env physics state, read-only"),
-])
+@pytest.mark.parametrize(
+    "name,value,match",
+    [
+        ("steps", -5, r"steps must be an integer in \[0, 511\]"),
+        ("steps", 2.5, "steps must be an integer"),
+        ("steps", 512, r"steps must be an integer in \[0, 511\]"),
+        ("rngs", 5, "rngs must be a numpy.random.Generator"),
+        ("U", 0.0, "'U' is per-env physics state, read-only"),
+        ("obs", 0.0, "'obs' is per-env physics state, read-only"),
+    ],
+)
 def test_sb3_set_attr_checks_per_env_state(name, value, match):
     """Per-env state other than target was written unchecked (steps -5 accepted, rngs 5
     failed later at reset): checked values, or a refusal naming the attribute; nothing
@@ -464,6 +511,7 @@ def test_sb3_env_method_reset_returns_obs_and_info_like_dummy_vec_env():
     """env_method("reset", indices=[i]) returns [(obs_i, info_i)] as SB3's DummyVecEnv does
     (it returned [None]), and takes the single env's seed and options."""
     from stable_baselines3.common.vec_env import DummyVecEnv
+
     kw = dict(scene="resonant", episode_steps=6)
     a = RollingDriveVecEnv(3, **kw)
     b = DummyVecEnv([lambda: rolling_env.make(**kw) for _ in range(3)])
@@ -478,7 +526,8 @@ def test_sb3_env_method_reset_returns_obs_and_info_like_dummy_vec_env():
         for (oa, ia), (ob, ib) in zip(ra, rb):
             np.testing.assert_array_equal(oa, ob, err_msg=f"reset obs differ ({kwargs})")
             assert ia.keys() == ib.keys() and all(np.array_equal(ia[k], ib[k]) for k in ia), (
-                f"reset infos differ ({kwargs}): {ia} vs {ib}")
+                f"reset infos differ ({kwargs}): {ia} vs {ib}"
+            )
     sa = a.step(np.full((3, 3), 0.1, np.float32))
     sb = b.step(np.full((3, 3), 0.1, np.float32))
     np.testing.assert_array_equal(sa[0], sb[0], err_msg="steps after the resets differ")
@@ -487,12 +536,14 @@ def test_sb3_env_method_reset_returns_obs_and_info_like_dummy_vec_env():
 def test_make_vec_needs_neither_sb3_nor_torch():
     """``gym.make_vec("RollingDrive-v0")`` steps without importing Stable-Baselines3 or torch
     (they cost 1.3 s and ~300 MiB); the SB3 adapter still imports from rolling_env.vector."""
-    code = ("import sys, numpy as np, gymnasium as gym, rolling_env; "
-            "e = gym.make_vec('RollingDrive-v0', num_envs=2); e.reset(seed=0); "
-            "e.step(np.zeros((2, 3), dtype=np.float32)); "
-            "print(sorted(m for m in ('torch', 'stable_baselines3') if m in sys.modules)); "
-            "from rolling_env.vector import RollingDriveVecEnv; "
-            "print(RollingDriveVecEnv.__module__)")
+    code = (
+        "import sys, numpy as np, gymnasium as gym, rolling_env; "
+        "e = gym.make_vec('RollingDrive-v0', num_envs=2); e.reset(seed=0); "
+        "e.step(np.zeros((2, 3), dtype=np.float32)); "
+        "print(sorted(m for m in ('torch', 'stable_baselines3') if m in sys.modules)); "
+        "from rolling_env.vector import RollingDriveVecEnv; "
+        "print(RollingDriveVecEnv.__module__)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     lines = out.stdout.split("\n")
     assert lines[0] == "[]", f"gym.make_vec imported {lines[0]}"
@@ -503,6 +554,7 @@ def test_gymnasium_vector_env_needs_a_reset_before_step_like_sync():
     """As "sync" (gym.make's OrderEnforcing in each env): stepping an env that was never
     reset raises ResetNeeded, also after a masked first reset that left some envs out."""
     from gymnasium.error import ResetNeeded
+
     acts = np.zeros((3, 3), np.float32)
     for mode in ("sync", None):
         kw = {"vectorization_mode": mode} if mode else {}
@@ -522,7 +574,10 @@ def test_gymnasium_vector_env_needs_a_reset_before_step_like_sync():
 def test_a_batch_beyond_the_machine_memory_names_num_envs():
     """numpy's "Unable to allocate 7.9 PiB" named neither num_envs nor the scene keys that
     size an env's cells; checked before anything is allocated."""
-    with pytest.raises(ValueError, match=r"^num_envs = 1000000000000 envs x .* MiB of cell "
-                                         r"state each \(resolution = 16.0, grid_levels = 4, "
-                                         r"stroke_roll"):
+    with pytest.raises(
+        ValueError,
+        match=r"^num_envs = 1000000000000 envs x .* MiB of cell "
+        r"state each \(resolution = 16.0, grid_levels = 4, "
+        r"stroke_roll",
+    ):
         BatchCore(10**12)

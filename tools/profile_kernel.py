@@ -14,6 +14,7 @@ the samples are read).  Inlined helpers count towards the kernel they are inline
 (Debian: linux-perf) and ``nm`` (binutils).  A developer's tool: nothing in the package or
 the tests uses it.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,6 +32,7 @@ import numpy as np
 def _kernel_dispatchers():
     from rolling_env import _envkernel as EK
     from rolling_env import _kernel as K
+
     return [v for m in (EK, K) for v in vars(m).values() if hasattr(v, "overloads")]
 
 
@@ -44,8 +46,9 @@ def _perf_map_lines(tmp: str) -> list[str]:
             path = os.path.join(tmp, "k.o")
             with open(path, "wb") as f:
                 f.write(obj)
-            nm = subprocess.run(["nm", "-S", "--defined-only", path], capture_output=True,
-                                text=True, check=True).stdout
+            nm = subprocess.run(
+                ["nm", "-S", "--defined-only", path], capture_output=True, text=True, check=True
+            ).stdout
             for row in nm.splitlines():
                 parts = row.split()
                 if len(parts) == 4 and parts[2] in "tT":
@@ -105,24 +108,51 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         data = os.path.join(tmp, "perf.data")
         map_note = os.path.join(tmp, "map_path")
-        env = dict(os.environ, NUMBA_CACHE_DIR=os.path.join(tmp, "numba"),
-                   PROFILE_KERNEL_MAP=map_note)
+        env = dict(
+            os.environ, NUMBA_CACHE_DIR=os.path.join(tmp, "numba"), PROFILE_KERNEL_MAP=map_note
+        )
         try:
-            rec = subprocess.Popen(["perf", "record", "-q", "-e", "cpu-clock", "-F", "5000",
-                                    "-o", data, "--", sys.executable, __file__, "--workload",
-                                    "--scene", args.scene, "--envs", str(args.envs),
-                                    "--seconds", str(args.seconds)], env=env)
+            rec = subprocess.Popen(
+                [
+                    "perf",
+                    "record",
+                    "-q",
+                    "-e",
+                    "cpu-clock",
+                    "-F",
+                    "5000",
+                    "-o",
+                    data,
+                    "--",
+                    sys.executable,
+                    __file__,
+                    "--workload",
+                    "--scene",
+                    args.scene,
+                    "--envs",
+                    str(args.envs),
+                    "--seconds",
+                    str(args.seconds),
+                ],
+                env=env,
+            )
         except FileNotFoundError:
             print("perf not found (Debian: apt install linux-perf)")
             return 1
         code = rec.wait()
         try:
             if code != 0:
-                print(f"perf record failed (exit {code}): is perf allowed here "
-                      "(/proc/sys/kernel/perf_event_paranoid)?")
+                print(
+                    f"perf record failed (exit {code}): is perf allowed here "
+                    "(/proc/sys/kernel/perf_event_paranoid)?"
+                )
                 return 1
-            script = subprocess.run(["perf", "script", "-i", data, "-F", "ip,sym"],
-                                    capture_output=True, text=True, check=True).stdout
+            script = subprocess.run(
+                ["perf", "script", "-i", data, "-F", "ip,sym"],
+                capture_output=True,
+                text=True,
+                check=True,
+            ).stdout
         finally:
             if os.path.exists(map_note):  # the workload's perf map, once perf has read it
                 with open(map_note) as f:

@@ -1,5 +1,6 @@
 """Subcommand accuracy: the env's error at a scene's shipped settings against a refined
 reference, with its speed (``--all --out results/env_accuracy.md`` for every shipped scene)."""
+
 from __future__ import annotations
 
 from ..cli import emit, file_path, positive_int
@@ -9,33 +10,62 @@ REPORT = "results/env_accuracy.md"
 
 def register(sub):
     from ..accuracy import DEFAULT_GRID, DEFAULT_REFINE
-    p = sub.add_parser("accuracy", help="error of the env at a scene's shipped settings against "
-                       "a refined reference, and its steps/s",
-                       description="Run the scene's standard episodes at its shipped settings "
-                       "(Eq. 32 feedback, Eq. 32 open loop, uniform random actions), replay each "
-                       "action sequence open loop at two refined levels (sub-steps x K and 2K, "
-                       "grid x G and 2G), extrapolate them (Richardson, assumed second order) "
-                       "and print the shipped env's final-position error in tolerances, its "
-                       "slip-work error in %, its steps/s and the reference's uncertainty.  "
-                       f"`--all --out {REPORT}` regenerates the report of every shipped scene.")
+
+    p = sub.add_parser(
+        "accuracy",
+        help="error of the env at a scene's shipped settings against "
+        "a refined reference, and its steps/s",
+        description="Run the scene's standard episodes at its shipped settings "
+        "(Eq. 32 feedback, Eq. 32 open loop, uniform random actions), replay each "
+        "action sequence open loop at two refined levels (sub-steps x K and 2K, "
+        "grid x G and 2G), extrapolate them (Richardson, assumed second order) "
+        "and print the shipped env's final-position error in tolerances, its "
+        "slip-work error in %, its steps/s and the reference's uncertainty.  "
+        f"`--all --out {REPORT}` regenerates the report of every shipped scene.",
+    )
     which = p.add_mutually_exclusive_group(required=True)
     which.add_argument("--scene", help="scene name or YAML path")
-    which.add_argument("--all", action="store_true",
-                       help="every shipped scene (configs/scenes/*.yaml)")
-    p.add_argument("--refine", type=positive_int("refine", 1, 100000), default=DEFAULT_REFINE,
-                   help=f"K: the reference levels have K and 2K times the shipped sub-steps "
-                   f"(default {DEFAULT_REFINE})")
-    p.add_argument("--refine-grid", type=positive_int("refine-grid", 1, 1024),
-                   default=DEFAULT_GRID, help="G: the reference levels have G and 2G times the "
-                   f"shipped cells per contact radius (default {DEFAULT_GRID})")
-    p.add_argument("--episodes-random", type=positive_int("episodes-random", 0, 100), default=1,
-                   help="episodes of uniform random actions (default 1)")
-    p.add_argument("--seed", type=positive_int("seed", 0, 2**31 - 1), default=0,
-                   help="reset seed of every episode and seed of the random actions (default 0)")
-    p.add_argument("--episode-steps", type=positive_int("episode-steps", 1, 10**6), default=None,
-                   help="episode length (default: the scene's own; shorter for a quick check)")
-    p.add_argument("--out", type=file_path("out"), default=None,
-                   help="also write a markdown report to this file")
+    which.add_argument(
+        "--all", action="store_true", help="every shipped scene (configs/scenes/*.yaml)"
+    )
+    p.add_argument(
+        "--refine",
+        type=positive_int("refine", 1, 100000),
+        default=DEFAULT_REFINE,
+        help=f"K: the reference levels have K and 2K times the shipped sub-steps "
+        f"(default {DEFAULT_REFINE})",
+    )
+    p.add_argument(
+        "--refine-grid",
+        type=positive_int("refine-grid", 1, 1024),
+        default=DEFAULT_GRID,
+        help="G: the reference levels have G and 2G times the "
+        f"shipped cells per contact radius (default {DEFAULT_GRID})",
+    )
+    p.add_argument(
+        "--episodes-random",
+        type=positive_int("episodes-random", 0, 100),
+        default=1,
+        help="episodes of uniform random actions (default 1)",
+    )
+    p.add_argument(
+        "--seed",
+        type=positive_int("seed", 0, 2**31 - 1),
+        default=0,
+        help="reset seed of every episode and seed of the random actions (default 0)",
+    )
+    p.add_argument(
+        "--episode-steps",
+        type=positive_int("episode-steps", 1, 10**6),
+        default=None,
+        help="episode length (default: the scene's own; shorter for a quick check)",
+    )
+    p.add_argument(
+        "--out",
+        type=file_path("out"),
+        default=None,
+        help="also write a markdown report to this file",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_run)
 
@@ -44,11 +74,14 @@ def _command(args) -> str:
     """The command line that reproduces the run, for the report's header."""
     parts = ["rolling-drive accuracy", "--all" if args.all else f"--scene {args.scene}"]
     from ..accuracy import DEFAULT_GRID, DEFAULT_REFINE
-    for flag, val, default in (("--refine", args.refine, DEFAULT_REFINE),
-                               ("--refine-grid", args.refine_grid, DEFAULT_GRID),
-                               ("--episodes-random", args.episodes_random, 1),
-                               ("--seed", args.seed, 0),
-                               ("--episode-steps", args.episode_steps, None)):
+
+    for flag, val, default in (
+        ("--refine", args.refine, DEFAULT_REFINE),
+        ("--refine-grid", args.refine_grid, DEFAULT_GRID),
+        ("--episodes-random", args.episodes_random, 1),
+        ("--seed", args.seed, 0),
+        ("--episode-steps", args.episode_steps, None),
+    ):
         if val != default:
             parts.append(f"{flag} {val}")
     if args.out is not None:
@@ -60,6 +93,7 @@ def _run(args):
     from ..accuracy import check_levels, check_scene, report, run, table
     from ..io import check_writable, write_text
     from ..scenes import list_scenes
+
     scenes = list_scenes() if args.all else [args.scene]
     overrides = None if args.episode_steps is None else {"episode_steps": args.episode_steps}
     # every scene and level is built once before any episode runs: a bad value fails at
@@ -69,16 +103,23 @@ def _run(args):
             check_scene(scene, overrides)
         except ValueError as e:
             raise ValueError(f"--scene: {e}") from None
-        for flag, factors in (("refine", [(args.refine, 1), (2 * args.refine, 1)]),
-                              ("refine-grid", [(1, args.refine_grid),
-                                               (1, 2 * args.refine_grid)])):
+        for flag, factors in (
+            ("refine", [(args.refine, 1), (2 * args.refine, 1)]),
+            ("refine-grid", [(1, args.refine_grid), (1, 2 * args.refine_grid)]),
+        ):
             try:
                 check_levels(scene, factors, overrides)
             except ValueError as e:
                 raise ValueError(f"--{flag}: {e}") from None
     out = None if args.out is None else check_writable(args.out)
-    res = run(scenes, refine=args.refine, grid=args.refine_grid,
-              episodes_random=args.episodes_random, seed=args.seed, overrides=overrides)
+    res = run(
+        scenes,
+        refine=args.refine,
+        grid=args.refine_grid,
+        episodes_random=args.episodes_random,
+        seed=args.seed,
+        overrides=overrides,
+    )
     human = "\n\n".join(table(r) for r in res["scenes"])
     if out is not None:
         write_text(out, report(res["scenes"], _command(args), res["seconds"]))
