@@ -1,6 +1,6 @@
 """Slow, plain-numpy REFERENCE of the MDR drive model: the textbook "plain spring row".
 
-See /work/shared/physics.md. A row of independent springs (spacing dx, centres
+The model: docs/physics.md.  A row of independent springs (spacing dx, centres
 x_i = x_lo + (i + 0.5) dx) in the frame that moves with the sphere; a spring is in contact
 iff its centre is (uN_i = d - (x_i - c)^2 / R > 0). Readable rather than fast; no numba,
 float64 throughout. The fast kernel is tested against this, and it is a line on the

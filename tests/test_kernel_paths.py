@@ -390,7 +390,7 @@ def test_ledger_impulse_in_steady_partial_slip(mu, bounds):
     5e-4 / 1e-4 for mu 1 (1.1e-4 / 2.2e-5), and falling at least 4x from 16 to 64.  Each edge
     cell takes its own integral (``_edge_impulse``: exact where it sticks or slides all through) and
     the inner cells at their limit the curvature term: with the inner cells corrected alone
-    (fd98fb5) this measured 6.9e-4 / 4.3e-5 and 2.6e-3 / 1.9e-4, the trapezoid on T alone
+    this measured 6.9e-4 / 4.3e-5 and 2.6e-3 / 1.9e-4, the trapezoid on T alone
     8.3e-5 / 6.1e-6 and 6.9e-5 / 4.0e-6 (docs/physics.md, "Impulse and work with finite
     friction")."""
     from rolling_env.model import Drive, DriveParams
