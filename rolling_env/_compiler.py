@@ -8,7 +8,7 @@ from sub-step to sub-step (branches the predictor misses).  With LLVM's options
 ``-force-vector-interleave=1`` a loop runs 8-wide with the last iteration masked (AVX-512
 mask registers) and no remainder: the serial batched kernel is about 3% faster on the
 default and loaded scenes and 2% on resonant on the project's machine (AMD EPYC Zen 4, 256
-envs; docs/performance-log.md, eleventh session).
+envs; docs/performance-log.md, "Compilation options").
 
 These are process-wide LLVM command-line options (llvmlite's ``set_option``; numba has no
 per-function switch).  ``Compiler`` sets them only while it compiles one of our kernels and
