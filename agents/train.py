@@ -28,6 +28,7 @@ import json
 import os
 import platform
 import re
+import shlex
 import shutil
 import signal
 import sys
@@ -468,7 +469,8 @@ def _setup(args, command=None):
         scene_fields=scene_fields(trained),
     )
     atomic_write(work / "config.yml", lambda p: Path(p).write_text(yaml.safe_dump(cfg)))
-    command = command or " ".join(sys.argv)
+    # as typed from the repository root (argv[0] is the module's file under python -m)
+    command = command or "python -m agents.train " + shlex.join(sys.argv[1:])
     atomic_write(work / "command.txt", lambda p: Path(p).write_text(command + "\n"))
     return model, eval_env, run, work, n_envs, n_timesteps, trained, vec_env
 

@@ -216,6 +216,8 @@ def test_short_training_run_saves_loadable_model(tmp_path):
         assert (run / f).exists(), f"missing {f}"
     meta = json.loads((run / "meta.json").read_text())
     assert meta["env_steps"] >= 512 and meta["seed"] == 3 and not meta["interrupted"]
+    command = (run / "command.txt").read_text()
+    assert command.startswith("python -m agents.train --algo ppo --scene default"), command
     head = subprocess.run(
         ["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True, text=True
     )
