@@ -394,10 +394,21 @@ def test_seed_summary_sums_up_runs_that_differ_only_in_their_seed():
         assert seed_summary(other) == [], f"runs with another {key} were summed up over seeds"
 
 
+def _sigint_as_in_a_terminal():
+    """preexec_fn: Ctrl-C reaches the child as it does from an interactive shell (a
+    background job of a non-interactive shell, a CI runner's, ignores SIGINT, and children
+    inherit that)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_interrupted_training_leaves_loadable_checkpoint(tmp_path, sig):
     proc = subprocess.Popen(
-        _train(tmp_path, timesteps=10**7), cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+        _train(tmp_path, timesteps=10**7),
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        preexec_fn=_sigint_as_in_a_terminal,
     )
     run = tmp_path / "run"
     deadline = time.time() + 120

@@ -306,6 +306,13 @@ def test_staged_writes_are_all_or_none(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "b.png"]
 
 
+def _sigint_as_in_a_terminal():
+    """preexec_fn: Ctrl-C reaches the child as it does from an interactive shell (a
+    background job of a non-interactive shell, a CI runner's, ignores SIGINT, and children
+    inherit that)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_ends_a_long_compiled_run():
     """One simulate of 1e9 sub-steps per tick is a single numba call, which never returns to
     the interpreter to raise KeyboardInterrupt: Ctrl-C (SIGINT) left it running for minutes.
@@ -357,6 +364,7 @@ def test_ctrl_c_ends_a_long_compiled_run():
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
+        preexec_fn=_sigint_as_in_a_terminal,
     )
     try:
         time.sleep(6)  # imports done: the command (its compile or its kernel call) is running
@@ -396,7 +404,13 @@ with interrupt_ends_process():
     assert signal.getsignal(signal.SIGINT) is signal.SIG_DFL, "not restored after the block"
 print(sorted(p.name for p in out.iterdir()), (out / "a.csv").read_text())
 """
-    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        preexec_fn=_sigint_as_in_a_terminal,
+    )
     assert r.returncode == 0, r.stderr[-1000:]
     assert r.stdout.split() == ["interrupted", "['a.csv']", "old", "a"], r.stdout
 
