@@ -637,6 +637,25 @@ def _fmt_time_to_goal(t) -> str:
 _SEED_SUFFIX = re.compile(r"^(?P<name>.+)_seed(?P<seed>\d+)$")
 
 
+def seed_groups(rows: list[dict]) -> dict:
+    """``{(scene, name): [(row, seed), ...]}`` of the agents named ``<name>_seed<N>``
+    (agents.train's run folders); baselines and other names are left out."""
+    groups: dict = {}
+    for r in rows:
+        m = _SEED_SUFFIX.match(r["controller"])
+        if r["controller"] in BASELINES or m is None:
+            continue
+        groups.setdefault((r["scene"], m["name"]), []).append((r, int(m["seed"])))
+    return groups
+
+
+def one_configuration(rs: list[dict]) -> bool:
+    """Whether runs differ only in their seed: the same configuration (config.yml less the
+    seed), model file and training steps."""
+    kinds = {(r.get("config_key"), r.get("model_file"), r.get("train_env_steps")) for r in rs}
+    return len(kinds) == 1
+
+
 def seed_summary(rows: list[dict]) -> list[dict]:
     """Per scene, the agents that differ only in their seed (run folders ``<name>_seed<N>``,
     agents.train's default) summed up over the seeds, for each name with two runs or more:
@@ -647,20 +666,13 @@ def seed_summary(rows: list[dict]) -> list[dict]:
     says so.  One seed says little about an RL algorithm; this is the row to read where there
     are several."""
     verdicts = {(v["scene"], v["agent"]): v for v in goal_verdicts(rows)}
-    groups: dict = {}
-    for r in rows:
-        m = _SEED_SUFFIX.match(r["controller"])
-        if r["controller"] in BASELINES or m is None:
-            continue
-        groups.setdefault((r["scene"], m["name"]), []).append((r, int(m["seed"])))
     out = []
-    for (scene, name), members in groups.items():
+    for (scene, name), members in seed_groups(rows).items():
         if len(members) < 2:
             continue
         rs = [r for r, _ in members]
         seeds = [seed for _, seed in members]
-        kinds = {(r.get("config_key"), r.get("model_file"), r.get("train_env_steps")) for r in rs}
-        if len(kinds) > 1 or len(set(seeds)) < len(seeds):
+        if not one_configuration(rs) or len(set(seeds)) < len(seeds):
             print(
                 f"warning: {scene}: {', '.join(r['controller'] for r in rs)} are not summed "
                 "up over seeds: their configurations (config.yml less the seed), model files "

@@ -37,6 +37,8 @@ from .evaluate import (
     BASELINES,
     EPISODES_MAX,
     EVAL_SEED,
+    _budget,
+    _config_key,
     controllers_for,
     episode_metrics,
     held_out_targets,
@@ -98,7 +100,7 @@ def evaluate_variants(scene: str, runs: Path, episodes: int, ctrls: dict) -> lis
                 "tolerance": tol,
                 "model_file": getattr(ctrl, "file", "-"),
                 "episodes": len(per),
-                "config_key": _config(ctrl),
+                "config_key": _config_key(getattr(ctrl, "run", None)),
                 "train_env_steps": _budget(getattr(ctrl, "run", None))["train_env_steps"],
                 "trained_numerics": getattr(ctrl, "numerics", ""),
             }
@@ -115,18 +117,6 @@ def evaluate_variants(scene: str, runs: Path, episodes: int, ctrls: dict) -> lis
             )
         env.close()
     return rows
-
-
-def _config(ctrl):
-    from .evaluate import _config_key
-
-    return _config_key(getattr(ctrl, "run", None))
-
-
-def _budget(run):
-    from .evaluate import _budget as budget
-
-    return budget(run)
 
 
 def write(rows: list[dict], stats: list[dict], out: Path, episodes: int) -> None:

@@ -86,15 +86,16 @@ class ResidualVecEnv(VecEnvWrapper):
 
     def step_wait(self):
         obs, rew, done, infos = self.venv.step_wait()
-        for i in np.flatnonzero(done):
-            term = infos[i].get("terminal_observation")
-            if term is None:
-                continue
-            ctl = copy.deepcopy(self.controller)  # the plan goes on from the last tick
+        ended = [i for i in np.flatnonzero(done) if "terminal_observation" in infos[i]]
+        if ended:  # one copy of the baseline goes on from the last tick for every ended env
             rows = np.array(obs, dtype=np.float64)
-            rows[i] = term
-            act, _ = ctl.predict(rows, episode_start=np.zeros(self.num_envs, bool))
-            infos[i]["terminal_observation"] = augment(term, act[i])
+            for i in ended:
+                rows[i] = infos[i]["terminal_observation"]
+            act, _ = copy.deepcopy(self.controller).predict(
+                rows, episode_start=np.zeros(self.num_envs, bool)
+            )
+            for i in ended:
+                infos[i]["terminal_observation"] = augment(infos[i]["terminal_observation"], act[i])
         self._base_action, _ = self.controller.predict(obs, episode_start=np.asarray(done))
         return augment(obs, self._base_action), rew, done, infos
 

@@ -30,24 +30,19 @@ MIN_SHARE = 0.8  # share of seeds that must meet the goal (4 of 5)
 
 
 def _groups(rows: list[dict]) -> dict:
-    """{(scene, configuration): [rows]}: baselines alone, agents by run name less its seed
-    (only where every run of the name has the same configuration, model file and budget,
-    as ``evaluate.seed_summary`` requires), a run without a seed suffix alone."""
-    from .evaluate import _SEED_SUFFIX, BASELINES
+    """{(scene, configuration): [rows]}: each baseline alone, the runs ``<name>_seed<N>`` of
+    one configuration together (``evaluate.seed_groups``, ``one_configuration``), any other
+    run alone."""
+    from .evaluate import one_configuration, seed_groups
 
-    groups: dict = {}
-    for r in rows:
-        m = _SEED_SUFFIX.match(r["controller"])
-        name = r["controller"] if (r["controller"] in BASELINES or m is None) else m["name"]
-        groups.setdefault((r["scene"], name), []).append(r)
-    out = {}
-    for key, rs in groups.items():
-        kinds = {(r.get("config_key"), r.get("model_file"), r.get("train_env_steps")) for r in rs}
-        if len(kinds) == 1:
-            out[key] = rs
-        else:  # not one configuration: each run stands alone
-            for r in rs:
-                out[(key[0], r["controller"])] = [r]
+    group_of = {}  # row id -> its configuration's key
+    for (scene, name), members in seed_groups(rows).items():
+        rs = [r for r, _ in members]
+        if one_configuration(rs):
+            group_of.update((id(r), (scene, name)) for r in rs)
+    out: dict = {}  # in the order of the rows, as the tables list them
+    for r in rows:  # baselines, runs without a seed, runs of mixed configurations alone
+        out.setdefault(group_of.get(id(r), (r["scene"], r["controller"])), []).append(r)
     return out
 
 
