@@ -8,10 +8,15 @@ import re
 from pathlib import Path
 
 from rolling_env.io import atomic_write  # noqa: F401  (re-exported)
-from rolling_env.scenes import read_yaml
+from rolling_env.paths import HYPERPARAM_DIR as CONF_DIR
+from rolling_env.scenes import (  # noqa: F401  (re-exported: run folders record them)
+    fields_digest,
+    read_yaml,
+    scene_digest,
+    scene_fields,
+    scene_key,
+)
 
-REPO = Path(__file__).resolve().parent.parent
-CONF_DIR = REPO / "configs" / "hyperparams"
 ALGOS = ("ppo", "sac", "td3")
 
 
@@ -176,6 +181,8 @@ ZOO_KEYS = frozenset(
 #: keys of this project's own (not RL Zoo's): a residual policy on an Eq. 32 baseline
 #: (``agents.residual``)
 RESIDUAL_KEYS = frozenset({"residual", "residual_scale"})
+#: and one decision per excitation period in the design space of Eq. 32 (``agents.period``)
+PERIOD_KEYS = frozenset({"period_actions"})
 #: keywords of the algorithms' __init__ that the script sets (or that YAML cannot express)
 _SET_BY_SCRIPT = {
     "env": "the env is built from --scene",
@@ -355,6 +362,7 @@ def check_hyperparams(algo: str, hp: dict) -> dict:  # noqa: C901 (one check per
     and the values inside ``policy_kwargs`` are checked too (``check_policy_kwargs``).  Returns
     ``{"n_envs", "n_timesteps", "policy", "normalize" (dict or None), "env_kwargs",
     "action_noise" (None or a (type, std) pair), "residual" (None or a (base, scale) pair),
+    "period_actions" (bool),
     "kwargs" (for the algorithm)}``;
     ``n_timesteps`` is None when the entry has none."""
     import inspect
@@ -362,13 +370,14 @@ def check_hyperparams(algo: str, hp: dict) -> dict:  # noqa: C901 (one check per
 
     cls = _algo_class(algo)
     params = inspect.signature(cls.__init__).parameters
-    script = ZOO_KEYS | RESIDUAL_KEYS
+    script = ZOO_KEYS | RESIDUAL_KEYS | PERIOD_KEYS
     unknown = sorted(k for k in hp if k not in script and k not in params or k == "self")
     if unknown:
         raise ValueError(
             f"unknown hyper-parameter(s) {', '.join(map(repr, unknown))} for "
             f"{cls.__name__} (keys: the RL Zoo keys {sorted(ZOO_KEYS)}, "
-            f"{sorted(RESIDUAL_KEYS)} and the keywords of {cls.__name__}.__init__)"
+            f"{sorted(RESIDUAL_KEYS | PERIOD_KEYS)} and the keywords of "
+            f"{cls.__name__}.__init__)"
         )
     out = {
         "n_envs": _int("n_envs", hp.get("n_envs", 1)),
@@ -447,6 +456,17 @@ def check_hyperparams(algo: str, hp: dict) -> dict:  # noqa: C901 (one check per
         raise ValueError(
             "hyper-parameter 'residual_scale' needs 'residual' (the baseline the "
             "policy's actions are added to)"
+        )
+    from .period import check_period_actions
+
+    try:
+        out["period_actions"] = check_period_actions(hp.get("period_actions", False))
+    except ValueError as e:
+        raise ValueError(f"hyper-parameter {e}") from None
+    if out["period_actions"] and out["residual"] is not None:
+        raise ValueError(
+            "hyper-parameters 'period_actions' and 'residual' exclude each other (a period "
+            "action is a working point, not a correction of a tick's action)"
         )
     kwargs = {}
     for k, v in hp.items():
@@ -696,35 +716,6 @@ REWARD_KEYS = ("w_track", "w_wear", "w_final")
 BEFORE_KEY = {"grid_levels": 0}
 
 
-def scene_fields(scene) -> dict:
-    """What a run was trained on: the checked Scene's fields (``load_scene``) except its name
-    and description, which change nothing in the env, plus ``n_sub``, the sub-steps per tick
-    the env takes (``sub_steps: auto`` alone does not say how many: that depends on the
-    scene's ``accuracy`` and on the rule of ``rolling_env.scenes.auto_sub_steps``)."""
-    import dataclasses
-
-    from rolling_env.scenes import Scene, load_scene
-
-    sc = scene if isinstance(scene, Scene) else load_scene(scene)
-    fields = {k: v for k, v in dataclasses.asdict(sc).items() if k not in ("name", "description")}
-    fields["randomize"] = [list(t) for t in sc.randomize]  # as YAML and JSON read it back
-    fields["n_sub"] = int(sc.n_sub)
-    return fields
-
-
-def fields_digest(fields: dict) -> str:
-    """SHA-256 (hex) of a ``scene_fields`` mapping (keys sorted, floats as repr: exact)."""
-    import hashlib
-    import json
-
-    return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()
-
-
-def scene_digest(scene) -> str:
-    """SHA-256 (hex) of ``scene_fields``: equal digests, equal physics, task and numerics."""
-    return fields_digest(scene_fields(scene))
-
-
 def completed_fields(fields: dict) -> dict:
     """A run's recorded ``scene_fields`` with what a run recorded before a key existed filled
     in: a Scene field with a default (``accuracy``) takes its default, as a scene file that
@@ -769,28 +760,6 @@ def numerics_note(trained: dict, now: dict) -> str:
                 else f"{k} {trained.get(k, '-')!r} (now {now.get(k, '-')!r})"
             )
     return ", ".join(parts)
-
-
-def scene_key(scene) -> str:
-    """Key of a scene: in the hyper-parameter YAML, the run folders (``runs/<key>/``) and the
-    results tables.  A shipped scene's name; for a scene file, its stem, except where the
-    stem names a shipped scene whose content differs: then ``<stem>-<first 8 hex digits of
-    scene_digest>`` (a custom default.yaml with mu 0.01 is not ``default``).  A file that
-    cannot be read keeps its stem (loading it reports the error)."""
-    import rolling_env.scenes as scenes
-
-    p = Path(scene)
-    if p.suffix.lower() not in (".yaml", ".yml"):
-        return str(scene)
-    stem = p.stem
-    if stem in scenes.list_scenes():
-        try:
-            own = scene_digest(p)
-        except (ValueError, OSError):
-            return stem
-        if own != scene_digest(stem):
-            return f"{stem}-{own[:8]}"
-    return stem
 
 
 def differing_fields(a: dict, b: dict) -> str:

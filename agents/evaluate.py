@@ -43,6 +43,15 @@ from rolling_env.rollout import rollout
 
 from .baselines import Eq32Design, Eq32Feedback, Eq32OpenLoop
 from .common import SAVED_AT, atomic_write, buildable_scene, one_line, run_config, scene_key
+from .verdicts import (  # noqa: F401  (re-exported: the tables' and the tests' names)
+    BASELINES,
+    goal_verdicts,
+    marked,
+    numerics_marks,
+    one_configuration,
+    seed_groups,
+    time_to_goal,
+)
 
 EVAL_SEED = 20261122  # held out: training uses seeds < 1e6, evaluation envs seed + 10000
 #: --episodes at most: an episode of a shipped scene (512 ticks) takes about 0.25 s per
@@ -117,17 +126,19 @@ def load_agent(path, env=None, base_scene=None):
     """Load ``<name>.zip`` and, if beside it, ``<name>_vecnormalize.pkl`` (observation
     statistics applied, frozen): a ``NormalizedAgent``, or for a residual run (its config.yml
     names the baseline) a ``residual.ResidualAgent`` acting with its baseline, which is built
-    for ``base_scene`` (default: the scene of ``env``, else the run's).  The algorithm is read
-    from the zip (``model_algo``) and
-    checked against the run's config.yml where there is one.  A model without statistics is
-    refused where its run's config.yml says the run normalised observations, and loaded with
-    a warning where there is no config.yml to tell."""
+    for ``base_scene`` (default: the scene of ``env``, else the run's), or for a period-level
+    run a ``period.PeriodAgent`` that decodes its working points on that scene too.
+    The algorithm is read from the zip (``model_algo``) and checked against the run's
+    config.yml where there is one.  A model without statistics is refused where its run's
+    config.yml says the run normalised observations, and loaded with a warning where there is
+    no config.yml to tell."""
     import stable_baselines3 as sb3
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     from rolling_env.env import OBS_NAMES
 
     from .common import parse_kwargs
+    from .period import N_ACTION as N_PERIOD_ACTION
     from .residual import N_BASE, ResidualAgent, ResidualVecEnv
 
     path = Path(path)
@@ -153,6 +164,14 @@ def load_agent(path, env=None, base_scene=None):
             f"{path} takes {width} observations: it is a residual agent (the env's "
             f"{len(OBS_NAMES)} and its baseline's action), and the config.yml of "
             "its run, which names the baseline, is not beside it"
+        )
+    period = bool(cfg and cfg.get("period_actions"))
+    n_act = getattr(model.action_space, "shape", (0,))[0]
+    if not period and n_act == N_PERIOD_ACTION:
+        raise ValueError(
+            f"{path} acts with {n_act} numbers: it is a period-level agent (an Eq. 32 "
+            "working point per period), and the config.yml of its run, which says so, is "
+            "not beside it"
         )
     if stats.exists():
         scene = env.unwrapped.scene if env is not None else "default"
@@ -193,14 +212,19 @@ def load_agent(path, env=None, base_scene=None):
             file=sys.stderr,
         )
     agent = NormalizedAgent(model, vecnorm)
+    if residual is None and not period:
+        return agent
+    # the baseline, or the decoding of a period action, of the scene the agent knows
+    scene = (
+        base_scene
+        if base_scene is not None
+        else (env.unwrapped.scene if env is not None else _trained_scene(cfg))
+    )
     if residual is not None:
-        scene = (
-            base_scene
-            if base_scene is not None
-            else (env.unwrapped.scene if env is not None else _trained_scene(cfg))
-        )
         return ResidualAgent(agent, *residual, scene)
-    return agent
+    from .period import PeriodAgent
+
+    return PeriodAgent(agent, scene)
 
 
 def _residual_of(cfg: dict | None, path: Path):
@@ -279,6 +303,17 @@ def episode_metrics(data: dict, tol: float) -> dict:
 def _stem(scene) -> str:
     p = Path(str(scene))
     return p.stem if p.suffix.lower() in (".yaml", ".yml") else str(scene)
+
+
+def load_checked_agent(path, env, scene=None):
+    """A model .zip trained by agents.train, for ``env``: its run folder's scene checked
+    against ``scene`` (default the env's) by content (a copy of a scene under another name is
+    fine), then ``load_agent``.  Registered as the ``sb3`` model loader of ``rolling-drive
+    rollout`` (entry-point group ``rolling_drive.model_loaders``, pyproject.toml)."""
+    check_run_scene(
+        Path(path).parent, env.unwrapped.scene if scene is None else scene, by_key=False
+    )
+    return load_agent(path, env)
 
 
 def check_run_scene(run: Path, scene, by_key: bool = True) -> str:
@@ -560,37 +595,6 @@ COLS = [
     "machine",
     "trained_numerics",
 ]
-BASELINES = ("eq32-open-loop", "eq32-feedback")
-
-
-def goal_verdicts(rows: list[dict]) -> list[dict]:
-    """Per scene: the best baseline (lowest mean final |error|) against each trained agent.
-    The goal: final error <= half the baseline's at no more slip work."""
-    out = []
-    for scene in dict.fromkeys(r["scene"] for r in rows):
-        rs = [r for r in rows if r["scene"] == scene]
-        base = [r for r in rs if r["controller"] in BASELINES]
-        if not base:
-            continue
-        b = min(base, key=lambda r: r["final_abs_error_mean"])
-        for r in rs:
-            if r["controller"] in BASELINES:
-                continue
-            e_ratio = r["final_abs_error_mean"] / b["final_abs_error_mean"]
-            w_b, w_a = b["slip_work_mean"], r["slip_work_mean"]
-            no_more_wear = w_a <= w_b  # both exactly 0 with mu = inf
-            out.append(
-                {
-                    "scene": scene,
-                    "agent": r["controller"],
-                    "baseline": b["controller"],
-                    "error_ratio": e_ratio,
-                    "slip_ratio": (w_a / w_b) if w_b > 0 else (np.nan if w_a == 0 else np.inf),
-                    "met": bool(e_ratio <= 0.5 and no_more_wear),
-                    "time_to_goal": time_to_goal(r.get("goal_log"), b),
-                }
-            )
-    return out
 
 
 def read_goal_log(run: Path | None):
@@ -614,46 +618,10 @@ def read_goal_log(run: Path | None):
     return log
 
 
-def time_to_goal(log, base: dict):
-    """(env steps, wall seconds) of the first periodic evaluation in which the agent met the
-    goal against the baseline row ``base``: the mean final |error| of its episodes at most
-    half the baseline's mean over the held-out targets, at no more mean slip work.  None
-    where the run has no log, "never" where no evaluation met it."""
-    if log is None:
-        return None
-    for e in log:
-        err, slip = np.mean(e["final_abs_error"]), np.mean(e["slip_work"])
-        if err <= 0.5 * base["final_abs_error_mean"] and slip <= base["slip_work_mean"]:
-            return int(e["env_steps"]), float(e["wall_seconds"])
-    return "never"
-
-
 def _fmt_time_to_goal(t) -> str:
     if t is None:
         return "not logged"
     return t if isinstance(t, str) else f"{t[0]:,}, {t[1]:.0f}"
-
-
-_SEED_SUFFIX = re.compile(r"^(?P<name>.+)_seed(?P<seed>\d+)$")
-
-
-def seed_groups(rows: list[dict]) -> dict:
-    """``{(scene, name): [(row, seed), ...]}`` of the agents named ``<name>_seed<N>``
-    (agents.train's run folders); baselines and other names are left out."""
-    groups: dict = {}
-    for r in rows:
-        m = _SEED_SUFFIX.match(r["controller"])
-        if r["controller"] in BASELINES or m is None:
-            continue
-        groups.setdefault((r["scene"], m["name"]), []).append((r, int(m["seed"])))
-    return groups
-
-
-def one_configuration(rs: list[dict]) -> bool:
-    """Whether runs differ only in their seed: the same configuration (config.yml less the
-    seed), model file and training steps."""
-    kinds = {(r.get("config_key"), r.get("model_file"), r.get("train_env_steps")) for r in rs}
-    return len(kinds) == 1
 
 
 def seed_summary(rows: list[dict]) -> list[dict]:
@@ -715,24 +683,6 @@ def _fmt_settle(st: float) -> str:
     return "never" if not np.isfinite(st) else f"{st * 1e3:.2f}"
 
 
-def numerics_marks(rows: list[dict]) -> dict:
-    """``{note: k}``: footnote number k (from 1, in the order of the rows) of each distinct
-    ``trained_numerics`` note of the rows (agents trained on other numerics of their scene)."""
-    marks: dict = {}
-    for r in rows:
-        note = r.get("trained_numerics") or ""
-        if note and note not in marks:
-            marks[note] = len(marks) + 1
-    return marks
-
-
-def _marked(name: str, notes, marks: dict) -> str:
-    """``name [k]`` with the footnote numbers of ``notes`` (one note or several)."""
-    notes = [notes] if isinstance(notes, str) else list(notes)
-    ks = sorted({marks[n] for n in notes if n})
-    return name + "".join(f" [{k}]" for k in ks)
-
-
 def write_tables(
     rows: list[dict], out: Path, episodes: int | None = None, model: str = "final"
 ) -> None:
@@ -789,7 +739,7 @@ def write_tables(
     ]
     for r in rows:
         tol = r["tolerance"]
-        name = _marked(r["controller"], note_of[(r["scene"], r["controller"])], marks)
+        name = marked(r["controller"], note_of[(r["scene"], r["controller"])], marks)
         budget = (
             f"{r['train_env_steps']:,}, {r['train_wall_seconds']:.0f}"
             if r["train_env_steps"]
@@ -828,7 +778,7 @@ def write_tables(
         ]
         for v in verdicts:
             sr = v["slip_ratio"]
-            agent = _marked(v["agent"], note_of.get((v["scene"], v["agent"]), ""), marks)
+            agent = marked(v["agent"], note_of.get((v["scene"], v["agent"]), ""), marks)
             lines.append(
                 f"| {v['scene']} | {agent} | {v['baseline']} | "
                 f"{v['error_ratio']:.2f} | {_fmt_ratio(sr)}"
@@ -851,9 +801,7 @@ def write_tables(
         ]
         for g in summary:
             seeds = ", ".join(str(k) for k in g["seed_list"])
-            agent = _marked(
-                g["agent"], [note_of.get((g["scene"], c), "") for c in g["runs"]], marks
-            )
+            agent = marked(g["agent"], [note_of.get((g["scene"], c), "") for c in g["runs"]], marks)
             lines.append(
                 f"| {g['scene']} | {agent} | {seeds} | {g['error_mean']:.2f} "
                 f"({g['error_min']:.2f}-{g['error_max']:.2f}) | "
@@ -902,7 +850,7 @@ def plot_scene(
     notes = {k: v for k, v in (notes or {}).items() if v}
     if marks is None:
         marks = numerics_marks([{"trained_numerics": n} for n in notes.values()])
-    labels = {name: _marked(name, note, marks) for name, note in notes.items()}
+    labels = {name: marked(name, note, marks) for name, note in notes.items()}
     import matplotlib
 
     matplotlib.use("Agg")

@@ -12,7 +12,7 @@ targets (rliable's runs x tasks).  Reported per configuration:
   final error, as in the goal table): the chance that a run of the configuration ends closer to
   the target than
   the baseline on the same target, averaged over targets, with its interval;
-* the seeds that meet the goal (``evaluate.goal_verdicts``), and whether the configuration
+* the seeds that meet the goal (``verdicts.goal_verdicts``), and whether the configuration
   holds the goal over seeds: at least 4 of 5 seeds meet it (80% of the runs where there are
   other counts) and the upper end of the IQM interval lies below half the better baseline's
   IQM.
@@ -31,9 +31,9 @@ MIN_SHARE = 0.8  # share of seeds that must meet the goal (4 of 5)
 
 def _groups(rows: list[dict]) -> dict:
     """{(scene, configuration): [rows]}: each baseline alone, the runs ``<name>_seed<N>`` of
-    one configuration together (``evaluate.seed_groups``, ``one_configuration``), any other
+    one configuration together (``verdicts.seed_groups``, ``one_configuration``), any other
     run alone."""
-    from .evaluate import one_configuration, seed_groups
+    from .verdicts import one_configuration, seed_groups
 
     group_of = {}  # row id -> its configuration's key
     for (scene, name), members in seed_groups(rows).items():
@@ -64,7 +64,7 @@ def seed_statistics(
     from rliable import library as rly
     from rliable import metrics
 
-    from .evaluate import BASELINES, goal_verdicts
+    from .verdicts import BASELINES, goal_verdicts
 
     def intervals(scores, func, n):
         # rliable's stratified bootstraps draw from numpy's global generator: seeded here
@@ -146,7 +146,7 @@ def seed_statistics(
 
 def markdown(stats: list[dict], marks: dict | None = None) -> list[str]:
     """The statistics section of comparison.md."""
-    from .evaluate import _marked
+    from .verdicts import marked
 
     marks = marks or {}
     lines = [
@@ -166,7 +166,7 @@ def markdown(stats: list[dict], marks: dict | None = None) -> list[str]:
         "|---|---|---|---|---|---|---|---|",
     ]
     for s in stats:
-        name = _marked(s["config"], s["trained_numerics"], marks)
+        name = marked(s["config"], s["trained_numerics"], marks)
         poi = (
             f"{s['poi']:.2f} [{s['poi_lo']:.2f}, {s['poi_hi']:.2f}] {s['baseline']}"
             if "poi" in s

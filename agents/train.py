@@ -161,6 +161,15 @@ def build_parser():
         f"(default: the entry's residual_scale, else {RESIDUAL_SCALE})",
     )
     p.add_argument(
+        "--period-actions",
+        action="store_true",
+        default=None,
+        help="one decision per excitation period: the policy's action is the next period's "
+        "Eq. 32 working point (direction and force ratio, creep, stroke, force), played "
+        "tick by tick (agents.period; overrides the entry's 'period_actions'; the run "
+        "folder is named <algo>-period_seed<N>)",
+    )
+    p.add_argument(
         "--num-threads",
         type=num_threads_arg,
         default=None,
@@ -358,6 +367,26 @@ def choose_vec_env(
     }
 
 
+def _wrap_actions(env, eval_env, checked: dict, hp: dict):
+    """The training and evaluation envs wrapped for a residual policy (its action added to a
+    baseline's) or a period-level one (a working point per period), and the entry as the
+    run's config.yml records it."""
+    residual = checked["residual"]
+    if residual is not None:
+        env = ResidualVecEnv(env, *residual)
+        eval_env = ResidualVecEnv(eval_env, *residual)
+        hp = dict(hp, residual=residual[0], residual_scale=residual[1])
+    if checked["period_actions"]:
+        from .period import PeriodVecEnv
+
+        try:
+            env, eval_env = PeriodVecEnv(env), PeriodVecEnv(eval_env)
+        except ValueError as e:
+            raise ValueError(f"--scene: {e}") from None
+        hp = dict(hp, period_actions=True)
+    return env, eval_env, hp
+
+
 def _setup(args, command=None):
     """Hyper-parameters, envs (the scene checked) and the model; then the run folder with its
     config, so that a bad scene or hyper-parameter leaves nothing behind."""
@@ -376,6 +405,8 @@ def _setup(args, command=None):
         hp["residual"] = args.residual
     if args.residual_scale is not None:
         hp["residual_scale"] = args.residual_scale
+    if getattr(args, "period_actions", None):
+        hp["period_actions"] = True
     if args.n_timesteps is None and "n_timesteps" not in hp:
         raise KeyError("n_timesteps")
     checked = check_hyperparams(args.algo, hp)  # every key used or refused, naming it
@@ -398,12 +429,14 @@ def _setup(args, command=None):
     # single envs: their infos carry x*, the target and the slip work (for GOAL_LOG); the
     # transitions are those of the batched env
     eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs, kind="dummy")
-    residual = checked["residual"]
-    if residual is not None:  # the policy's action is added to a baseline's
-        env = ResidualVecEnv(env, *residual)
-        eval_env = ResidualVecEnv(eval_env, *residual)
-        hp = dict(hp, residual=residual[0], residual_scale=residual[1])
-    name = args.algo + ("-residual" if residual is not None else "")
+    env, eval_env, hp = _wrap_actions(env, eval_env, checked, hp)
+    name = args.algo + (
+        "-residual"
+        if checked["residual"] is not None
+        else "-period"
+        if checked["period_actions"]
+        else ""
+    )
     run = Path(args.run_dir or f"runs/{key}/{name}_seed{args.seed}")
     work = run  # the folder trained into: the run folder, or its staging folder
     if run.is_symlink() or (run.exists() and (not run.is_dir() or any(run.iterdir()))):

@@ -29,12 +29,53 @@ N_SV = 36
 # sv[N_SV + 2 j] and sv[N_SV + 2 j + 1], j = 0 .. ticks_per_period - 1 (a table: the clock
 # repeats every period, and two transcendental calls per tick were 3% of the default step)
 
-# per-env extras written besides the observation: reward terms and info values
-X_REWARD, X_TRACK, X_WEAR, X_FINAL, X_SAT, X_U, X_V, X_N, X_T, X_SLIP, X_STICK, X_XS, X_VS = range(
-    13
+# per-env extras written besides the observation, in order: the reward, then the info values
+# under their info keys (``env.INFO_COLUMNS`` is this list less the reward); the X_* indices
+# are read from it
+EXTRA_NAMES = (
+    "reward",
+    "reward_track",
+    "reward_wear",
+    "reward_final",
+    "saturation",
+    "omega_R",
+    "v",
+    "N",
+    "T",
+    "slip_work",
+    "stick_fraction",
+    "xstar",
+    "vstar",
 )
-N_X = 13
-N_OBS = 13
+_X = {name: i for i, name in enumerate(EXTRA_NAMES)}
+X_REWARD, X_TRACK, X_WEAR, X_FINAL = (_X[k] for k in EXTRA_NAMES[:4])
+X_SAT, X_U, X_V, X_N, X_T = _X["saturation"], _X["omega_R"], _X["v"], _X["N"], _X["T"]
+X_SLIP, X_STICK, X_XS, X_VS = _X["slip_work"], _X["stick_fraction"], _X["xstar"], _X["vstar"]
+N_X = len(EXTRA_NAMES)
+
+# the observation, in order (``RollingDriveEnv.observation_space``); the O_* indices are read
+# from this one list
+OBS_NAMES = (
+    "error",
+    "vstar",
+    "roll_pos",
+    "translate_pos",
+    "normal_force",
+    "tangential_force",
+    "stick_fraction",
+    "clock_sin",
+    "clock_cos",
+    "time_fraction",
+    "last_N",
+    "last_roll",
+    "last_creep",
+)
+_O = {name: i for i, name in enumerate(OBS_NAMES)}
+O_ERROR, O_VSTAR, O_ROLL, O_TRANSLATE = (_O[k] for k in OBS_NAMES[:4])
+O_N, O_T, O_STICK = _O["normal_force"], _O["tangential_force"], _O["stick_fraction"]
+O_SIN, O_COS, O_TIME = _O["clock_sin"], _O["clock_cos"], _O["time_fraction"]
+O_LAST_N, O_LAST_ROLL, O_LAST_CREEP = _O["last_N"], _O["last_roll"], _O["last_creep"]
+N_OBS = len(OBS_NAMES)
 OBS_BOUND = 10.0
 
 
@@ -102,19 +143,19 @@ def _env_tick(e, act, sv, target, steps, W, st, p, out, obs, extra, mu, mass, lo
     k = steps[e]
     j = N_SV + 2 * (k % int(sv[S_TPP]))
     ob = obs[e]
-    ob[0] = _clip(err * sv[S_INV_TMAX])
-    ob[1] = _clip(vs * sv[S_INV_VREF])
-    ob[2] = _clip(ste[K.ST_C] * L0 * sv[S_INV_SR])
-    ob[3] = _clip(ste[K.ST_XSPH] * L0 * sv[S_INV_ST])
-    ob[4] = _clip(Nn * sv[S_INV_NMAX])
-    ob[5] = _clip(T * sv[S_INV_TREF])
-    ob[6] = oe[K.OUT_STICK]
-    ob[7] = sv[j]
-    ob[8] = sv[j + 1]
-    ob[9] = _clip(k * sv[S_INV_EPISODE])
-    ob[10] = a0
-    ob[11] = a1
-    ob[12] = a2
+    ob[O_ERROR] = _clip(err * sv[S_INV_TMAX])
+    ob[O_VSTAR] = _clip(vs * sv[S_INV_VREF])
+    ob[O_ROLL] = _clip(ste[K.ST_C] * L0 * sv[S_INV_SR])
+    ob[O_TRANSLATE] = _clip(ste[K.ST_XSPH] * L0 * sv[S_INV_ST])
+    ob[O_N] = _clip(Nn * sv[S_INV_NMAX])
+    ob[O_T] = _clip(T * sv[S_INV_TREF])
+    ob[O_STICK] = oe[K.OUT_STICK]
+    ob[O_SIN] = sv[j]
+    ob[O_COS] = sv[j + 1]
+    ob[O_TIME] = _clip(k * sv[S_INV_EPISODE])
+    ob[O_LAST_N] = a0
+    ob[O_LAST_ROLL] = a1
+    ob[O_LAST_CREEP] = a2
     track = -sv[S_WTRACK] * abs(err) * sv[S_INV_TMAX]
     wear = -sv[S_WWEAR] * slip * sv[S_INV_WREF]
     final = 0.0
@@ -216,8 +257,8 @@ def reset_obs(e, sv, target, obs):
     ob = obs[e]
     for i in range(N_OBS):
         ob[i] = 0.0
-    ob[0] = _clip(target[e] * sv[S_INV_TMAX])  # as in _env_tick
-    ob[8] = 1.0  # cos(0)
+    ob[O_ERROR] = _clip(target[e] * sv[S_INV_TMAX])  # as in _env_tick
+    ob[O_COS] = 1.0  # cos(0)
 
 
 def scene_vector(scene, a_max: float, drive, scales=None) -> np.ndarray:

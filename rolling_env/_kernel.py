@@ -85,28 +85,37 @@ def _jit_options() -> dict:
 JIT = _jit_options()
 
 # ----------------------------------------------------------------------------- state layout
-ST_C = 0  # patch centre c (spring frame)
-ST_A = 1  # contact half-width a currently in force
-ST_D = 2  # indentation d currently in force
-ST_VS = 3  # runner velocity v*
-ST_XS = 4  # runner displacement x*
-ST_XSPH = 5  # sphere translation (integral of v dt)
-ST_T = 6  # tangential force T
-ST_IMP = 7  # cumulative impulse of T
-ST_SLIP = 8  # cumulative slip work (friction dissipation, wear measure)
-ST_REL = 9  # cumulative release work (elastic energy carried off by released material)
-ST_DRIVE = 10  # cumulative drive work  integral T (omega R - v) dt
-ST_RUNNER = 11  # cumulative work of T on the runner  integral T v* dt
-ST_EXT = 12  # cumulative work of F_ext on the runner
-ST_TIME = 13  # time
-ST_FLAG = 14  # error flags (bit field, see FLAG_*)
-ST_ITER = 15  # cumulative Newton iterations (finite friction, free runner)
-ST_SNAP = 16  # cumulative elastic energy lost beyond the Coulomb work when springs snap to
-# the lower friction limit of an instantaneous normal-load drop
-ST_KIN0 = 17  # runner's kinetic energy at reset: the ledger's starting balance (written by
-# Drive.reset, read by Drive.energy; the kernel never touches it)
-ST_LEVEL = 18  # grid level k of a level grid (``P_LEVELS`` > 0): cells of dx / 2^k
-N_STATE = 19
+#: the per-env state vector, slot by slot; the ST_* indices are read from this one list
+STATE_NAMES = (
+    "c",  # patch centre c (spring frame)
+    "a",  # contact half-width a currently in force
+    "d",  # indentation d currently in force
+    "vs",  # runner velocity v*
+    "xs",  # runner displacement x*
+    "xsph",  # sphere translation (integral of v dt)
+    "T",  # tangential force T
+    "imp",  # cumulative impulse of T
+    "slip",  # cumulative slip work (friction dissipation, wear measure)
+    "rel",  # cumulative release work (elastic energy carried off by released material)
+    "drive",  # cumulative drive work  integral T (omega R - v) dt
+    "runner",  # cumulative work of T on the runner  integral T v* dt
+    "ext",  # cumulative work of F_ext on the runner
+    "time",  # time
+    "flag",  # error flags (bit field, see FLAG_*)
+    "iter",  # cumulative Newton iterations (finite friction, free runner)
+    "snap",  # cumulative elastic energy lost beyond the Coulomb work when springs snap to
+    # the lower friction limit of an instantaneous normal-load drop
+    "kin0",  # runner's kinetic energy at reset: the ledger's starting balance (written by
+    # Drive.reset, read by Drive.energy; the kernel never touches it)
+    "level",  # grid level k of a level grid (``P_LEVELS`` > 0): cells of dx / 2^k
+)
+_ST = {name: i for i, name in enumerate(STATE_NAMES)}
+ST_C, ST_A, ST_D, ST_VS, ST_XS = _ST["c"], _ST["a"], _ST["d"], _ST["vs"], _ST["xs"]
+ST_XSPH, ST_T, ST_IMP, ST_SLIP, ST_REL = _ST["xsph"], _ST["T"], _ST["imp"], _ST["slip"], _ST["rel"]
+ST_DRIVE, ST_RUNNER, ST_EXT, ST_TIME = _ST["drive"], _ST["runner"], _ST["ext"], _ST["time"]
+ST_FLAG, ST_ITER, ST_SNAP, ST_KIN0 = _ST["flag"], _ST["iter"], _ST["snap"], _ST["kin0"]
+ST_LEVEL = _ST["level"]
+N_STATE = len(STATE_NAMES)
 
 # (omega_n dt)^2 (omega_n on the stuck contact) at which the runner step is half-way from
 # the exact (piecewise) scheme to backward Euler (``_blend``)
@@ -116,16 +125,21 @@ FLAG_GRID = 1  # the contact reached the end of the spring row
 FLAG_NONFINITE = 2  # a non-finite value appeared (kernel stopped)
 FLAG_SLIDE = 4  # massless runner with no force equilibrium (|F_ext| > mu N)
 
-# per-tick outputs
-OUT_T = 0  # T at the end of the tick
-OUT_IMP = 1  # impulse of T over the tick
-OUT_VS = 2  # v* at the end of the tick
-OUT_XS = 3  # x* at the end of the tick
-OUT_SLIP = 4  # slip work during the tick
-OUT_C = 5  # patch centre at the end of the tick
-OUT_N = 6  # normal force
-OUT_STICK = 7  # stuck fraction of the contact length at the end of the tick (1 with mu = inf)
-N_OUT = 8
+# per-tick outputs, in order; the OUT_* indices are read from this one list
+OUT_NAMES = (
+    "T",  # T at the end of the tick
+    "imp",  # impulse of T over the tick
+    "vs",  # v* at the end of the tick
+    "xs",  # x* at the end of the tick
+    "slip",  # slip work during the tick
+    "c",  # patch centre at the end of the tick
+    "N",  # normal force
+    "stick",  # stuck fraction of the contact length at the end of the tick (1 with mu = inf)
+)
+_OUT = {name: i for i, name in enumerate(OUT_NAMES)}
+OUT_T, OUT_IMP, OUT_VS, OUT_XS = _OUT["T"], _OUT["imp"], _OUT["vs"], _OUT["xs"]
+OUT_SLIP, OUT_C, OUT_N, OUT_STICK = _OUT["slip"], _OUT["c"], _OUT["N"], _OUT["stick"]
+N_OUT = len(OUT_NAMES)
 
 # rows of the cell work array W (``Drive.cells``, ``BatchCore.cells[e]``; cells along the
 # second axis): the tangential contents U, the build pass's A and B (U_end = A + B s), then,

@@ -91,7 +91,7 @@ def check_levels(scene, level_factors, overrides=None) -> list[tuple[int, float]
 def check_scene(scene, overrides=None) -> None:
     """Build the scene's env and both Eq. 32 baselines, so that a scene that does not load, or
     that the baselines cannot drive, is refused before any episode runs."""
-    from agents.baselines import Eq32Feedback, Eq32OpenLoop
+    from .baselines import Eq32Feedback, Eq32OpenLoop
 
     env = _make(scene, overrides=overrides)
     try:
@@ -120,8 +120,7 @@ def record(
     """One episode of ``kind`` at the shipped settings: its actions (float32, as the
     controllers give them), final x* [m], total slip work [J] and target [m].  ``random``
     plays ``actions`` (pre-sampled)."""
-    from agents.baselines import Eq32Feedback, Eq32OpenLoop
-
+    from .baselines import Eq32Feedback, Eq32OpenLoop
     from .rollout import rollout
 
     env = _make(scene, overrides=overrides)

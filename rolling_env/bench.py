@@ -3,7 +3,7 @@
 * kernel throughput per scene in cell updates per second (cells in contact x sub-steps / s),
   against a rough machine limit;
 * single env steps/s through ``gym.make`` vs Gymnasium's Pendulum-v1, measured the same way;
-* the naive plain-numpy spring row (tests/naive.py) at equal working-point accuracy;
+* the naive plain-numpy spring row (rolling_env.naive) at equal working-point accuracy;
 * scene specialisation: the scene's kernel vs the same kernel with every feature switched on;
 * batched env (256 envs) vs the single env, serial and threaded kernel and the default
   (threads chosen at run time), over batch sizes, and through the Gymnasium and SB3 adapters;
@@ -707,13 +707,9 @@ def _timed(fn, calls=1):
 def naive_equal_accuracy():
     """Working point (0.7, 0.1, 2.5): ours at 8 springs/a1 (worst-case error 6.6e-3 over grid
     alignments) vs the naive row at 64 springs/a1 (1.1e-2): ours is the more accurate."""
-    from . import analytic
+    from . import analytic, naive
     from . import experiments as ex
-    from .converge import naive_module
 
-    naive = naive_module()
-    if naive is None:
-        return None
     case = (0.7, 0.1, 2.5)
     ref = analytic.eq32(*case)
 
@@ -996,7 +992,7 @@ def report(res) -> str:
             "|---|---|---|---|---|",
             f"| ours | 8 springs/a1 | {n['ours_error']:.1e} | {n['ours_seconds']:.2e} | "
             f"{n['ours_cold_seconds']:.2e} |",
-            f"| naive (tests/naive.py) | 64 springs/a1 | {n['naive_error']:.1e} | "
+            f"| naive (rolling_env.naive) | 64 springs/a1 | {n['naive_error']:.1e} | "
             f"{n['naive_seconds']:.2e} | {n['naive_cold_seconds']:.2e} |",
             "",
             f"Speed-up at (better than) equal accuracy: {n['speedup']:.0f}x with each kernel "

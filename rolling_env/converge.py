@@ -8,7 +8,7 @@ Quantities (one line each on the plot, ``quantity`` column of the CSV):
   envelope falls at second order); the time is that of one working point (two runs of three
   periods, one sub-step per half period: the kernel is exact within a sub-step here).
 * ``naive:<case>``    the same protocol (prescribed runner, square wave, impulse over the last
-  period, affine in v*) with the plain-numpy spring row of ``tests/naive.py``, one alignment.
+  period, affine in v*) with the plain-numpy spring row of ``rolling_env.naive``, one alignment.
 * ``dyn_v_grid`` / ``dyn_slip_grid``   mean runner velocity and slip work of a finite-mass,
   finite-friction run (``DYN``) vs a 4x finer grid, at a fixed fine sub-step;
 * ``dyn_v_dt`` / ``dyn_slip_dt``       the same vs a 16x finer sub-step, at a fixed fine grid;
@@ -37,7 +37,6 @@ least-squares slope of -log(error) against log(refinement) over all points of a 
 from __future__ import annotations
 
 import csv
-import importlib.util
 import io
 import time
 from pathlib import Path
@@ -71,17 +70,6 @@ def _best_time(fn, repeats):
     return val, best
 
 
-def naive_module():
-    """tests/naive.py imported by path (the tests folder is not a package); None if absent."""
-    path = Path(__file__).resolve().parent.parent / "tests" / "naive.py"
-    if not path.exists():
-        return None
-    spec = importlib.util.spec_from_file_location("rolling_naive", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def order(x, err) -> float:
     """Observed convergence order: -slope of log(err) against log(x) (least squares)."""
     x, err = np.asarray(x, float), np.asarray(err, float)
@@ -109,9 +97,8 @@ def _wp_rows(cases, res_list, repeats):
 
 
 def _naive_rows(res_list):
-    naive = naive_module()
-    if naive is None:
-        return []
+    from . import naive
+
     ref = float(analytic.eq32(*NAIVE_CASE))
     rows = []
     for per_a in res_list:

@@ -15,21 +15,7 @@ from . import _kernel as K
 from .model import Drive, DriveParams, check_flags
 from .scenes import EPISODE_STEPS_MAX, Scene, draw_physics, episode_scene, load_scene
 
-OBS_NAMES = (
-    "error",
-    "vstar",
-    "roll_pos",
-    "translate_pos",
-    "normal_force",
-    "tangential_force",
-    "stick_fraction",
-    "clock_sin",
-    "clock_cos",
-    "time_fraction",
-    "last_N",
-    "last_roll",
-    "last_creep",
-)
+OBS_NAMES = EK.OBS_NAMES  # the observation, in order (one list: the kernel writes it)
 OBS_BOUND = EK.OBS_BOUND
 
 
@@ -472,27 +458,15 @@ def check_actions(action, shape) -> np.ndarray:
     return a
 
 
-INFO_COLUMNS = {  # info key: column of the env kernel's extras (see _envkernel.X_*)
-    "reward_track": EK.X_TRACK,
-    "reward_wear": EK.X_WEAR,
-    "reward_final": EK.X_FINAL,
-    "saturation": EK.X_SAT,
-    "omega_R": EK.X_U,
-    "v": EK.X_V,
-    "N": EK.X_N,
-    "T": EK.X_T,
-    "slip_work": EK.X_SLIP,
-    "stick_fraction": EK.X_STICK,
-    "xstar": EK.X_XS,
-    "vstar": EK.X_VS,
-}
+#: info key: column of the env kernel's extras (``_envkernel.EXTRA_NAMES`` less the reward)
+INFO_COLUMNS = {k: i for i, k in enumerate(EK.EXTRA_NAMES) if k != "reward"}
 _INFO_KEYS = tuple(INFO_COLUMNS)
 # the info columns are one block of the extras, in the order of INFO_COLUMNS: the batched
 # infos take them with one slice rather than a gather
 _INFO_LO = min(INFO_COLUMNS.values())
 _INFO_HI = _INFO_LO + len(INFO_COLUMNS)
 if list(INFO_COLUMNS.values()) != list(range(_INFO_LO, _INFO_HI)):  # not an assert: kept under -O
-    raise ImportError("rolling_env: INFO_COLUMNS must follow the order of _envkernel.X_*")
+    raise ImportError("rolling_env: INFO_COLUMNS must follow the order of _envkernel.EXTRA_NAMES")
 
 
 def info_dict(x, target) -> dict:

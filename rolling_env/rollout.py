@@ -160,6 +160,27 @@ def controller_label(name: str) -> str:
     return f"{run}-{p.stem}" if run else p.stem
 
 
+MODEL_LOADERS = "rolling_drive.model_loaders"
+
+
+def load_model(path, env, scene=None):
+    """A trained model as a controller, through the loader an installed package registers
+    under the entry-point group ``rolling_drive.model_loaders`` (``sb3``: agents.evaluate's
+    ``load_checked_agent``, which refuses a model trained on another scene than ``scene``).
+    The library imports no agent code of its own accord."""
+    from importlib.metadata import entry_points
+
+    found = {e.name: e for e in entry_points(group=MODEL_LOADERS)}
+    if not found:
+        raise ValueError(
+            f"controller {str(path)!r} is a model .zip, but no model loader is installed "
+            f"(entry-point group {MODEL_LOADERS!r}; installing rolling-drive registers "
+            "agents' SB3 loader)"
+        )
+    entry = found.get("sb3") or found[sorted(found)[0]]
+    return entry.load()(path, env, scene)
+
+
 def make_controller(name: str, env, seed=0, scene=None):
     """``random``, ``zero``, ``eq32`` (or ``eq32-open-loop``, its name in ``agents.evaluate``'s
     tables), ``eq32-feedback`` or a path to an SB3 model .zip
@@ -171,17 +192,12 @@ def make_controller(name: str, env, seed=0, scene=None):
     if name == "zero":
         return ZeroController()
     if name in ("eq32", "eq32-open-loop", "eq32-feedback"):
-        from agents import baselines
+        from . import baselines
 
         cls = baselines.Eq32Feedback if name == "eq32-feedback" else baselines.Eq32OpenLoop
         return cls.from_env(env)
     if name.endswith(".zip") and Path(name).exists():
-        from agents.evaluate import check_run_scene, load_agent
-
-        check_run_scene(
-            Path(name).parent, env.unwrapped.scene if scene is None else scene, by_key=False
-        )  # by content: a copy of a scene under another name is fine
-        return load_agent(name, env)
+        return load_model(name, env, scene)
     raise ValueError(
         f"controller must be random, zero, eq32 (or eq32-open-loop), "
         f"eq32-feedback or an existing model .zip, got {name!r}"

@@ -1,8 +1,7 @@
 """Stable-Baselines3 adapter of the batched RollingDrive-v0 (``RollingDriveVecEnv``).
 
 Kept apart from ``rolling_env.vector`` so that ``gym.make_vec("RollingDrive-v0")`` does not
-import Stable-Baselines3 and torch; ``from rolling_env.vector import RollingDriveVecEnv`` still
-works (a lazy re-export).
+import Stable-Baselines3 and torch: this module imports ``vector``, never the other way.
 """
 
 from __future__ import annotations

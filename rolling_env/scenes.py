@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .paths import SCENE_DIR  # noqa: F401  (re-exported: the shipped scenes)
 from .validation import check_range
 
-SCENE_DIR = Path(__file__).resolve().parent.parent / "configs" / "scenes"
 _INF = math.inf
 DEFAULT_ACCURACY = 0.01  # a scene's ``accuracy`` where its file leaves it out
 DEFAULT_GRID_LEVELS = 4  # a scene's ``grid_levels`` where its file leaves it out
@@ -440,3 +440,51 @@ def read_yaml(path, what: str = "scene file"):
 
 def list_scenes() -> list[str]:
     return sorted(p.stem for p in SCENE_DIR.glob("*.yaml"))
+
+
+# ------------------------------------------------------- what a scene is, as runs record it
+
+
+def scene_fields(scene) -> dict:
+    """What a run was trained on: the checked Scene's fields (``load_scene``) except its name
+    and description, which change nothing in the env, plus ``n_sub``, the sub-steps per tick
+    the env takes (``sub_steps: auto`` alone does not say how many: that depends on the
+    scene's ``accuracy`` and on the rule of ``auto_sub_steps``)."""
+    sc = scene if isinstance(scene, Scene) else load_scene(scene)
+    fields = {k: v for k, v in dataclasses.asdict(sc).items() if k not in ("name", "description")}
+    fields["randomize"] = [list(t) for t in sc.randomize]  # as YAML and JSON read it back
+    fields["n_sub"] = int(sc.n_sub)
+    return fields
+
+
+def fields_digest(fields: dict) -> str:
+    """SHA-256 (hex) of a ``scene_fields`` mapping (keys sorted, floats as repr: exact)."""
+    import hashlib
+    import json
+
+    return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()
+
+
+def scene_digest(scene) -> str:
+    """SHA-256 (hex) of ``scene_fields``: equal digests, equal physics, task and numerics."""
+    return fields_digest(scene_fields(scene))
+
+
+def scene_key(scene) -> str:
+    """Key of a scene: in the hyper-parameter YAML, the run folders (``runs/<key>/``) and the
+    results tables.  A shipped scene's name; for a scene file, its stem, except where the
+    stem names a shipped scene whose content differs: then ``<stem>-<first 8 hex digits of
+    scene_digest>`` (a custom default.yaml with mu 0.01 is not ``default``).  A file that
+    cannot be read keeps its stem (loading it reports the error)."""
+    p = Path(scene)
+    if p.suffix.lower() not in (".yaml", ".yml"):
+        return str(scene)
+    stem = p.stem
+    if stem in list_scenes():
+        try:
+            own = scene_digest(p)
+        except (ValueError, OSError):
+            return stem
+        if own != scene_digest(stem):
+            return f"{stem}-{own[:8]}"
+    return stem

@@ -733,13 +733,3 @@ class RollingDriveVectorEnv(_gym_vector_base()):
 
 
 _MASK_KEYS = tuple("_" + k for k in info_arrays(np.zeros((1, EK.N_X)), np.zeros(1)))
-
-
-def __getattr__(name):
-    """``RollingDriveVecEnv`` lives in ``rolling_env.sb3_vec`` (it imports Stable-Baselines3 and
-    torch, which ``gym.make_vec`` does not need: 1.3 s and ~300 MiB); imported on first use."""
-    if name == "RollingDriveVecEnv":
-        from .sb3_vec import RollingDriveVecEnv
-
-        return RollingDriveVecEnv
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

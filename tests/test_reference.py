@@ -1,4 +1,4 @@
-"""The numba finite-volume kernel against the slow plain-numpy spring row (tests/naive.py).
+"""The numba finite-volume kernel against the slow plain-numpy spring row (rolling_env.naive).
 
 Both discretise the same continuum (physics.md) differently: the naive row converges
 erratically (about 1-3% at 100-200 springs per radius), ours smoothly.  On random
@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import math
 
-import naive
 import numpy as np
 import pytest
 
 from rolling_env import experiments as ex
+from rolling_env import naive
 from rolling_env.model import Drive, DriveParams
 
 GEO = ex.Geometry()

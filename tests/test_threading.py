@@ -15,10 +15,10 @@ import pytest
 
 import rolling_env  # noqa: F401  (registers RollingDrive-v0)
 import rolling_env._envkernel as EK
+from rolling_env.sb3_vec import RollingDriveVecEnv
 from rolling_env.vector import (
     PARALLEL_MIN_ENVS,
     BatchCore,
-    RollingDriveVecEnv,
     ThreadPolicy,
     max_threads,
     thread_choices,

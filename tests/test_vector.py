@@ -12,10 +12,10 @@ import pytest
 
 import rolling_env
 import rolling_env._envkernel as EK
+from rolling_env.sb3_vec import RollingDriveVecEnv
 from rolling_env.vector import (
     PARALLEL_MIN_ENVS,
     BatchCore,
-    RollingDriveVecEnv,
     ThreadPolicy,
     max_threads,
 )
@@ -535,19 +535,19 @@ def test_sb3_env_method_reset_returns_obs_and_info_like_dummy_vec_env():
 
 def test_make_vec_needs_neither_sb3_nor_torch():
     """``gym.make_vec("RollingDrive-v0")`` steps without importing Stable-Baselines3 or torch
-    (they cost 1.3 s and ~300 MiB); the SB3 adapter still imports from rolling_env.vector."""
+    (they cost 1.3 s and ~300 MiB); the SB3 adapter imports from rolling_env.sb3_vec."""
     code = (
         "import sys, numpy as np, gymnasium as gym, rolling_env; "
         "e = gym.make_vec('RollingDrive-v0', num_envs=2); e.reset(seed=0); "
         "e.step(np.zeros((2, 3), dtype=np.float32)); "
         "print(sorted(m for m in ('torch', 'stable_baselines3') if m in sys.modules)); "
-        "from rolling_env.vector import RollingDriveVecEnv; "
+        "from rolling_env.sb3_vec import RollingDriveVecEnv; "
         "print(RollingDriveVecEnv.__module__)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     lines = out.stdout.split("\n")
     assert lines[0] == "[]", f"gym.make_vec imported {lines[0]}"
-    assert lines[1] == "rolling_env.sb3_vec", f"lazy re-export gave {lines[1]!r}"
+    assert lines[1] == "rolling_env.sb3_vec", f"the SB3 adapter is {lines[1]!r}"
 
 
 def test_gymnasium_vector_env_needs_a_reset_before_step_like_sync():

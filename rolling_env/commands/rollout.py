@@ -62,7 +62,7 @@ def _run(args):
     # files named by the scene's key (agents' run folders and tables use it too), not by the
     # name inside the YAML: a copy of default.yaml with other values keeps "name: default"
     # and would overwrite the shipped scene's rollout
-    from agents.common import scene_key
+    from ..scenes import scene_key
 
     key = scene_key(args.scene)
     stem = f"{key}_{controller_label(args.controller)}_seed{args.seed}"
