@@ -780,7 +780,7 @@ def test_overwrite_stopped_by_sigterm_keeps_both_runs(tmp_path):
 
 @pytest.mark.parametrize("algo", ["ppo", "sac"])
 def test_training_is_reproducible_from_the_seed(algo, tmp_path):
-    """Issue #4: everything reproducible from --seed.  Two runs with the same seed give
+    """Everything reproducible from --seed.  Two runs with the same seed give
     bit-identical policy parameters, VecNormalize statistics and evaluation log; another seed
     gives other parameters (so the check can fail).  Both in this process (torch on one
     thread, as agents.train sets it)."""
