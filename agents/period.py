@@ -4,11 +4,13 @@ The policy's action (4 numbers in [-1, 1]) is the next period's working point of
 square wave (``PeriodExcitation``), executed tick by tick:
 
 * ``drive`` (a[0]): the drive direction (its sign) and strength: the force ratio
-  delta = 1 - |a[0]| (1 - delta_min), so 0 drives nowhere (equal forces) and +-1 as fast as
-  the scene's N_min allows.  Where |a[0]| < ``HOLD`` the period holds instead: one tick at
+  delta = 1 - |a[0]| (1 - delta_min), +-1 as fast as the scene's N_min allows.  Where
+  |a[0]| < ``HOLD`` (nearly equal forces, which would drive nowhere) the period holds: one tick at
   N_min releases the stored tangential deflection (on entering a hold only), then N_max with
   no rolling and no creep keeps the runner on a stuck contact (the baselines' stop);
-* ``creep`` (a[1]): the creep ratio xi in [0, creep_cap] (the design's wearless window);
+* ``creep`` (a[1]): the creep ratio xi in [0, creep_cap] (``Eq32Design.creep_cap``: half the
+  slip limit at the design's w; at the largest w the creep per step reaches 0.8 of it, still
+  within it);
 * ``stroke`` (a[2]): the rolling amplitude w = W/a1 in [2, w_max] (Eq. 32's domain, within
   what the rate and the strokes allow);
 * ``force`` (a[3]): the larger force N1 in [N_min, N_max]; the smaller is delta^1.5 N1.
@@ -68,7 +70,8 @@ class PeriodExcitation:
         }
 
     def encode(self, delta: float, creep: float, w: float, direction: int = 1, N1=None):
-        """The period action of a working point (the inverse of ``decode``)."""
+        """The period action of a working point (the inverse of ``decode`` outside the hold
+        band: a delta so near 1 that |drive| < ``HOLD`` decodes as a hold)."""
         sc, d = self.scene, self.design
         N1 = sc.N_max if N1 is None else N1
         drive = (1.0 - delta) / (1.0 - d.delta_min) * (1 if direction >= 0 else -1)

@@ -126,14 +126,16 @@ def build_parser():
         "--eval-freq",
         type=positive_int("eval-freq", 1, 10**12),
         default=10000,
-        help="env steps between evaluations",
+        help="steps of the training env between evaluations (env steps; periods for "
+        "--period-actions)",
     )
     p.add_argument("--eval-episodes", type=positive_int("eval-episodes", 1, 10**6), default=5)
     p.add_argument(
         "--checkpoint-freq",
         type=positive_int("checkpoint-freq", 1, 10**12),
         default=50000,
-        help="env steps between checkpoints",
+        help="steps of the training env between checkpoints (env steps; periods for "
+        "--period-actions)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument(
@@ -198,6 +200,17 @@ class _AtomicCheckpoint:
         return Cb()
 
 
+def ticks_per_step(venv) -> int:
+    """Env ticks in one step of a (wrapped) training env: a period-level env's period, else
+    1 (its steps are the env's ticks)."""
+    while venv is not None:
+        ex = getattr(venv, "excitation", None)
+        if ex is not None:
+            return int(ex.ticks)
+        venv = getattr(venv, "venv", None)
+    return 1
+
+
 def _eval_callback(
     eval_env, run: Path, eval_freq: int, n_episodes: int, on_eval=None, tol: float | None = None
 ):
@@ -208,11 +221,13 @@ def _eval_callback(
     (``best_model_vecnormalize.pkl``: the statistics it was selected with).  ``GOAL_LOG``
     keeps, per evaluation, the env steps, the wall time since the start of training and
     each episode's final |error| and slip work (``agents.evaluate``'s time to goal).  ``on_eval``,
-    if given, is called after each evaluation with (env steps, mean eval reward)."""
+    if given, is called after each evaluation with (steps of the training env, as
+    ``n_timesteps`` counts them, and the mean eval reward)."""
     from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
     scratch = run / ".eval_scratch"
     t0 = time.perf_counter()
+    per_step = ticks_per_step(eval_env)  # env steps (ticks) in a step of the training env
     log: list = []
 
     class GoalEval(EvalCallback):
@@ -249,7 +264,7 @@ def _eval_callback(
             if eps:
                 log.append(
                     {
-                        "env_steps": int(self.num_timesteps),
+                        "env_steps": int(self.num_timesteps) * per_step,
                         "wall_seconds": round(time.perf_counter() - t0, 2),
                         "final_abs_error": [e for e, _ in eps],
                         "slip_work": [w for _, w in eps],
@@ -260,7 +275,7 @@ def _eval_callback(
                     err = sum(e for e, _ in eps) / len(eps) / tol
                     slip = sum(w for _, w in eps) / len(eps)
                     print(
-                        f"eval at {self.num_timesteps:,} env steps: mean reward "
+                        f"eval at {self.num_timesteps * per_step:,} env steps: mean reward "
                         f"{self.parent.last_mean_reward:.2f}, final |error| {err:.2f} "
                         f"tolerance, slip work {slip:.3g} J",
                         flush=True,
@@ -425,11 +440,11 @@ def _setup(args, command=None):
         raise ValueError(f"hyper-parameter 'env_kwargs': {e}") from None
     trained = env.get_attr("scene", [0])[0]  # with the overrides of env_kwargs applied
     vec_env["num_threads"] = "auto" if args.num_threads is None else args.num_threads
-    check_policy(args.algo, checked["kwargs"], env)  # torch's errors named policy_kwargs
     # single envs: their infos carry x*, the target and the slip work (for GOAL_LOG); the
     # transitions are those of the batched env
     eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs, kind="dummy")
     env, eval_env, hp = _wrap_actions(env, eval_env, checked, hp)
+    check_policy(args.algo, checked["kwargs"], env)  # torch's errors named policy_kwargs
     name = args.algo + (
         "-residual"
         if checked["residual"] is not None
@@ -469,7 +484,7 @@ def _setup(args, command=None):
     kwargs = dict(checked["kwargs"])
     kwargs.pop("policy_kwargs", None)
     if checked["action_noise"] is not None:
-        kwargs["action_noise"] = action_noise(checked["action_noise"])
+        kwargs["action_noise"] = action_noise(checked["action_noise"], env.action_space.shape[0])
     cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[args.algo]
     model = cls(
         checked["policy"],
@@ -607,7 +622,8 @@ def train(args, *, command: str | None = None, on_eval=None) -> Path:
     """Train as the command line ``args`` (``build_parser().parse_args``) say and return the
     run folder.  ``command``: what command.txt records (default: this process's argv; a
     caller that trains in-process passes the equivalent ``agents.train`` command).
-    ``on_eval(env_steps, mean_reward)`` is called after each periodic evaluation.  Ctrl-C and
+    ``on_eval(steps, mean_reward)`` is called after each periodic evaluation (steps of the
+    training env, as ``n_timesteps`` counts them).  Ctrl-C and
     SIGTERM save a checkpoint (``Interrupted``) where this runs in the main thread; in another
     thread the caller handles signals."""
     import stable_baselines3 as sb3
@@ -682,7 +698,8 @@ def train(args, *, command: str | None = None, on_eval=None) -> Path:
         "scene_key": scene_key(scene),
         "scene_digest": scene_digest(trained),
         "seed": args.seed,
-        "env_steps": int(model.num_timesteps),
+        "env_steps": int(model.num_timesteps) * ticks_per_step(eval_env),
+        "decisions": int(model.num_timesteps),  # steps of the training env (periods or ticks)
         "wall_seconds": wall,
         "interrupted": interrupted,
         "n_envs": n_envs,

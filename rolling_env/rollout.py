@@ -1,8 +1,9 @@
 """Roll out a controller in a scene and keep the trajectory (CSV + plot).
 
 A controller is anything with SB3's ``predict(obs, state=None, episode_start=None,
-deterministic=True) -> (action, state)``: a trained SB3 model, the baselines in ``agents``, or
-the two trivial ones here.
+deterministic=True) -> (action, state)``: a trained SB3 model (loaded through an installed
+model loader, ``load_model``), the Eq. 32 baselines of ``rolling_env.baselines``, or the two
+trivial ones here.
 """
 
 from __future__ import annotations
@@ -174,8 +175,8 @@ def load_model(path, env, scene=None):
     if not found:
         raise ValueError(
             f"controller {str(path)!r} is a model .zip, but no model loader is installed "
-            f"(entry-point group {MODEL_LOADERS!r}; installing rolling-drive registers "
-            "agents' SB3 loader)"
+            f"(entry-point group {MODEL_LOADERS!r}; installing rolling-drive, or re-running "
+            "`pip install -e .` in a checkout, registers agents' SB3 loader)"
         )
     entry = found.get("sb3") or found[sorted(found)[0]]
     return entry.load()(path, env, scene)

@@ -153,3 +153,44 @@ def test_a_short_period_run_trains_saves_and_evaluates(tmp_path):
     assert isinstance(agent, PeriodAgent), f"loaded as {type(agent).__name__}"
     data = rollout(env, agent, seed=0)
     assert len(data["xstar"]) == 512 and np.isfinite(data["xstar"]).all()
+
+
+def test_holds_play_alike_in_training_and_evaluation():
+    """A period sequence with holds (entered, kept, left, in two stretches) gives the same
+    episode through ``PeriodAgent`` on a single env as through ``PeriodVecEnv``."""
+    sc = load_scene("default")
+    ex = PeriodExcitation(sc)
+    d = Eq32Design(sc)
+    drive = ex.encode(*d.choose(0.6 * d.v_max), d.w)
+    hold = np.zeros(4)
+    seq = [hold if k in (3, 4, 5, 10, 20, 21) else drive for k in range(64)]
+
+    class Seq:
+        k = 0
+
+        def predict(self, obs, state=None, episode_start=None, deterministic=True):
+            a = np.tile(seq[self.k], (len(obs), 1)).astype(np.float32)
+            self.k += 1
+            return a, state
+
+    env = rolling_env.make("default")
+    data = rollout(env, PeriodAgent(Seq(), env), seed=2)
+    venv = PeriodVecEnv(DummyVecEnv([lambda: rolling_env.make("default")]))
+    venv.seed(2)
+    venv.reset()
+    slip = 0.0
+    for a in seq:
+        _, _, done, infos = venv.step(np.asarray([a], np.float32))
+        slip += infos[0]["slip_work"]
+    assert done[0]
+    assert data["xstar"][-1] == infos[0]["xstar"], "the holds played differently"
+    assert data["total_slip_work"] == pytest.approx(slip, rel=1e-12), "the episodes' slip work"
+
+
+def test_a_td3_period_run_sizes_its_action_noise_to_the_period_action(tmp_path):
+    """TD3's action noise (td3.yml: normal) has the period action's four numbers."""
+    from agents.train import main as train_main
+
+    args = ["--algo", "td3", "--scene", "default", "--period-actions", "--n-timesteps", "16"]
+    args += ["--n-envs", "1", "--eval-freq", "16", "--eval-episodes", "1", "--no-progress"]
+    assert train_main(args + ["--run-dir", str(tmp_path / "run")]) == 0
