@@ -165,7 +165,7 @@ def load_agent(path, env=None, base_scene=None):
             f"{len(OBS_NAMES)} and its baseline's action), and the config.yml of "
             "its run, which names the baseline, is not beside it"
         )
-    period = bool(cfg and cfg.get("period_actions"))
+    period = _period_of(cfg, path)
     n_act = getattr(model.action_space, "shape", (0,))[0]
     if not period and n_act == N_PERIOD_ACTION:
         raise ValueError(
@@ -235,6 +235,19 @@ def _residual_of(cfg: dict | None, path: Path):
 
     try:
         return check_residual(cfg["residual"], cfg.get("residual_scale", SCALE_DEFAULT))
+    except ValueError as e:
+        raise ValueError(f"{path.parent / 'config.yml'}: {e}") from None
+
+
+def _period_of(cfg: dict | None, path: Path) -> bool:
+    """Whether a run's config.yml says it decides once per period (checked as agents.train
+    checks the key)."""
+    if not cfg:
+        return False
+    from .period import check_period_actions
+
+    try:
+        return check_period_actions(cfg.get("period_actions", False))
     except ValueError as e:
         raise ValueError(f"{path.parent / 'config.yml'}: {e}") from None
 

@@ -153,6 +153,10 @@ def test_a_short_period_run_trains_saves_and_evaluates(tmp_path):
     assert isinstance(agent, PeriodAgent), f"loaded as {type(agent).__name__}"
     data = rollout(env, agent, seed=0)
     assert len(data["xstar"]) == 512 and np.isfinite(data["xstar"]).all()
+    cfg = run / "config.yml"
+    cfg.write_text(cfg.read_text().replace("period_actions: true", "period_actions: 'yes'"))
+    with pytest.raises(ValueError, match=r"config\.yml: period_actions must be true or false"):
+        load_agent(run / "model.zip", env)
 
 
 def test_holds_play_alike_in_training_and_evaluation():
