@@ -22,7 +22,10 @@ path step by step from what it measures: it runs the faster of the serial kernel
 threaded kernel (at 2, 4, ... up to the calling thread's numba thread count), and now and then
 times a few steps of the others, the time from one step's start to the next, so that the
 Python work between steps counts too.  The probes of a slower path are spaced so that they
-cost at most ``ThreadPolicy.BUDGET`` of the time.  Transitions are bit-identical on every path,
+cost at most ``ThreadPolicy.BUDGET`` of the time, and a thread count is not probed at all while
+other processes leave too few of this process's cores idle (``rolling_env.hostload``, from
+Linux's CPU counters over the caller's recent steps): on a busy host threads lose, and each
+probe would cost a few slow steps.  Transitions are bit-identical on every path,
 so switching changes no result.  ``num_threads=1`` always runs the serial kernel, ``k`` the
 threaded kernel on k threads.  The thread count is set for each threaded step only and
 restored after it (numba keeps it per calling thread); the threading layer and its wait policy
@@ -60,6 +63,7 @@ from .env import (
     sample_target,
     target_option,
 )
+from .hostload import HostLoad
 from .model import CellViews
 from .scenes import load_scene
 
@@ -224,12 +228,15 @@ class ThreadPolicy:
     SETTLE = 0.01  # seconds after leaving threads during which steps are not timed,
     # at least (see _settled)
     RETURNS = 5  # recent costs of the way back from a probe kept (their median counts)
+    ROOM = 0.5  # k threads are probed while at least k - ROOM cores are spare (see _no_room)
 
-    def __init__(self, choices, clock=time.perf_counter):
+    def __init__(self, choices, clock=time.perf_counter, load=None):
         self.choices = tuple(int(k) for k in choices)
         if not self.choices:
             raise ValueError("choices must hold at least one thread count")
         self.clock = clock
+        self.load = load  # a HostLoad, or None: probe whatever the host's load
+        self.gated = 0  # probes put off for want of spare cores
         self._kernels = [_kernel_for(k) for k in self.choices]
         n = len(self.choices)
         self.estimate = [math.nan] * n  # seconds per step of each choice, as last measured
@@ -270,12 +277,15 @@ class ThreadPolicy:
         if end is not None:
             t = self.estimate[self.current]
             gap = now - end
-            step = end - self._start + (gap if not gap > self.PAUSE * t else self.PAUSE * t)
+            paused = gap > self.PAUSE * t
+            step = end - self._start + (self.PAUSE * t if paused else gap)
             timed = prev == self._before and (self._settle_end is None or self._settled(step))
             if timed and prev == self.current and self._returning is None and self._watch is None:
                 self._add(step)  # the common case, kept short
             else:
                 self._record(prev, step, timed)
+        if self.load is not None:
+            self.load.observe(end is None or paused)
         if self.probing is not None:
             seconds, timed = self._probe
             if (timed >= self.PROBE and seconds >= self.SPAN) or (
@@ -289,6 +299,8 @@ class ThreadPolicy:
             and self._fresh >= self.PROBE
         ):
             j = min((d, j) for j, d in enumerate(self._due) if j != self.current)[1]
+            if self._no_room(j):
+                return self._pick(prev, now)
             self.estimate[self.current] = self._window_sum / len(self._window)
             self.probing = j
             self._urgent = None if self._urgent == j else self._urgent
@@ -296,11 +308,31 @@ class ThreadPolicy:
             self._probe_spent = [0.0, 0]
             self.probes += 1
             self._leave(self.current, j, now)
+        return self._pick(prev, now)
+
+    def _pick(self, prev: int, now: float) -> int:
         pick = self.current if self.probing is None else self.probing
         self._before, self._prev = prev, pick
         self._start, self._end = now, None
         self.steps += 1
         return pick
+
+    def _no_room(self, j: int) -> bool:
+        """Whether a probe of choice j, more threads than the current choice, is put off:
+        the other processes left fewer than ``threads - ROOM`` cores of this process's CPU
+        set idle over the latest window of steps (``load``, a ``HostLoad``), so its threads
+        would wait for cores.  It is then due again ``MIN_STEPS`` steps later.  A probe of
+        fewer threads, or without a reading, always runs."""
+        k = self.choices[j]
+        if self.load is None or k <= self.choices[self.current] or j == self._urgent:
+            return False
+        room = self.load.spare()
+        if room is None or room >= k - self.ROOM:
+            return False
+        self.gated += 1
+        self._due[j] = self.steps + self.MIN_STEPS
+        self._next_due = min(d for i, d in enumerate(self._due) if i != self.current)
+        return True
 
     def done(self) -> None:
         """The step started by the last ``next`` has left the kernel."""
@@ -515,7 +547,8 @@ class BatchCore(CellViews):
             if len(choices) == 1:
                 self._step_fn = _kernel_for(choices[0])
             else:
-                self.thread_policy = self._step_fn = ThreadPolicy(choices)
+                # probes only thread counts that the cores other processes leave idle hold
+                self.thread_policy = self._step_fn = ThreadPolicy(choices, load=HostLoad())
 
     @property
     def threads(self) -> int:

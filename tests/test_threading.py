@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 
 import gymnasium as gym
 import numba
@@ -15,6 +16,7 @@ import pytest
 
 import rolling_env  # noqa: F401  (registers RollingDrive-v0)
 import rolling_env._envkernel as EK
+from rolling_env.hostload import HostLoad
 from rolling_env.sb3_vec import RollingDriveVecEnv
 from rolling_env.vector import (
     PARALLEL_MIN_ENVS,
@@ -195,6 +197,8 @@ def test_batch_runs_the_serial_kernel_when_a_forced_calibration_says_threads_los
     ref = BatchCore(8, max_episode_steps=30, num_threads=1)
     p = core.thread_policy
     assert p.choices == (1, 2)
+    assert isinstance(p.load, HostLoad), "the batch reads the host's load"
+    p.load = None  # probe whatever the host's load of the moment
     clock = FakeClock()
     p.clock = clock
     ran = {}
@@ -428,3 +432,160 @@ def test_train_records_the_vector_env_in_meta(tmp_path):
     meta = json.loads((run / "meta.json").read_text())
     assert meta["vec_env"] == {"kind": "dummy", "chosen_by": "--vec-env", "num_threads": 1}
     assert meta["env_steps"] >= 64
+
+
+# ----------------------------------------------------------------- probes and the host's load
+class _Load:
+    """A host load reading ``room[0]`` spare cores; counts the steps observed."""
+
+    def __init__(self, room):
+        self.room, self.steps, self.pauses = room, 0, 0
+
+    def observe(self, paused=False):
+        self.steps += 1
+        self.pauses += paused
+
+    def spare(self):
+        return self.room[0]
+
+
+def test_policy_puts_off_probes_of_threads_while_the_cores_are_taken():
+    """Other processes hold a core (``spare`` reports 0.9 of 2): the threads are not probed
+    at all, the gated count says why; once the cores are free they are probed and, faster
+    here, taken."""
+    clock = FakeClock()
+    room = [0.9]
+    p = ThreadPolicy((1, 2), clock=clock, load=_Load(room))
+    picks, _ = _drive(p, clock, 3000, lambda i, k: (1e-3, 0.6e-3)[i])
+    assert picks.count(1) == 0 and p.probes == 0, (picks.count(1), p.probes)
+    assert p.gated >= 3000 // ThreadPolicy.MIN_STEPS - 2, p.gated
+    room[0] = 1.9
+    picks, _ = _drive(p, clock, 2000, lambda i, k: (1e-3, 0.6e-3)[i])
+    assert p.threads == 2 and picks[-1000:].count(0) < 50, picks[-1000:].count(0)
+
+
+def test_policy_probes_fewer_threads_whatever_the_load():
+    """Threads won on the idle host; then the host fills (no spare core) and they run 4x
+    slower: the serial kernel is still probed and taken (the gate holds back only probes of
+    more threads)."""
+    clock = FakeClock()
+    room = [2.0]
+    p = ThreadPolicy((1, 2), clock=clock, load=_Load(room))
+
+    def cost(i, k):
+        busy = k >= 1000
+        room[0] = 0.2 if busy else 2.0
+        return (1e-3, 4e-3 if busy else 0.5e-3)[i]
+
+    picks, _ = _drive(p, clock, 3000, cost)
+    assert picks[900:1000].count(1) > 90, "threads win on the idle host"
+    assert picks[1100:].count(0) > 1890, picks[1100:].count(0)
+    assert p.gated > 0
+
+
+def test_policy_without_a_load_reading_probes_as_before():
+    """A reading of None (unknown, not Linux): the same picks as without a load."""
+    picks = []
+    for load in (None, _Load([None])):
+        clock = FakeClock()
+        p = ThreadPolicy((1, 2), clock=clock, load=load)
+        picks.append(_drive(p, clock, 2000, lambda i, k: (1e-3, 2e-3)[i])[0])
+        assert p.gated == 0
+    assert picks[0] == picks[1] and picks[0].count(1) > 0
+
+
+def _stat(path, busy, idle, cpus=(0, 1)):
+    """A /proc/stat with each CPU of ``cpus`` at ``busy`` ticks split over user, system and
+    steal, and ``idle`` idle ticks; plus a CPU outside the set, always busy."""
+    lines = [f"cpu  {busy * 9} 0 0 {idle * 9} 0 0 0 0 0 0"]
+    for c in cpus:
+        u, s = busy // 2, busy // 4
+        lines.append(f"cpu{c} {u} 0 {s} {idle} 7 0 0 {busy - u - s} 0 0")
+    lines.append(f"cpu9 {busy * 100} 0 0 0 0 0 0 0 0 0")
+    path.write_text("\n".join(lines + ["intr 1 2 3", "ctxt 5"]) + "\n")
+
+
+def test_host_load_counts_the_other_processes_cores(tmp_path):
+    """Windows of steps: over 1 s the set's two CPUs were busy 150 ticks (1.5 s at 100
+    ticks/s) of which this process used 0.4 s: the others took 1.1 cores, 0.9 are spare; the
+    CPU outside the set and the iowait column do not count.  A step sooner than
+    ``MIN_WINDOW`` reads nothing; a pause drops the open window (what ran meanwhile is not
+    counted)."""
+    stat = tmp_path / "stat"
+    t, own = [0.0], [0.0]
+    _stat(stat, 1000, 5000)
+    h = HostLoad(path=str(stat), clock=lambda: t[0], cpu_time=lambda: own[0], cpus=(0, 1))
+    h._hz = 100.0
+    h.observe()  # opens the first window
+    assert h.spare() is None, "nothing measured yet"
+    _stat(stat, 1075, 5025)  # each CPU: 75 more busy ticks
+    t[0], own[0] = 1.0, 0.4
+    h.observe()
+    assert h.spare() == pytest.approx(0.9, abs=1e-9), h.spare()
+    _stat(stat, 2000, 9000)  # too soon: counters not read, the window stays open
+    t[0] = 1.0 + 0.5 * HostLoad.MIN_WINDOW
+    h.observe()
+    assert h.spare() == pytest.approx(0.9, abs=1e-9)
+    _stat(stat, 1075, 5125)  # all idle since t = 1
+    t[0], own[0] = 2.0, 0.4
+    h.observe()
+    assert h.spare() == pytest.approx(2.0, abs=1e-9)
+    _stat(stat, 1175, 5125)  # this process alone kept both busy: nothing taken by others
+    t[0], own[0] = 3.0, 2.4
+    h.observe()
+    assert h.spare() == pytest.approx(2.0, abs=1e-9)
+    _stat(stat, 1375, 5125)  # others busy during the caller's pause: not counted
+    t[0] = 5.0
+    h.observe(paused=True)
+    _stat(stat, 1385, 5215)  # then 0.1 of a core each over 1 s: 0.2 taken
+    t[0] = 5.1
+    h.observe()
+    _stat(stat, 1395, 5305)
+    t[0] = 6.1
+    h.observe()
+    assert h.spare() == pytest.approx(1.8, abs=1e-9), h.spare()
+
+
+def test_host_load_unreadable_counters_read_as_unknown(tmp_path):
+    h = HostLoad(path=str(tmp_path / "missing"))
+    h.observe()
+    h.observe()
+    assert h.spare() is None
+    stat = tmp_path / "stat"
+    _stat(stat, 10, 10, cpus=(0,))
+    h = HostLoad(path=str(stat), cpus=(0, 1), clock=lambda: 0.0)
+    h.observe()
+    assert h.spare() is None, "a CPU of the set missing"
+
+
+def test_policy_tells_the_load_of_each_step_and_its_pauses():
+    clock = FakeClock()
+    load = _Load([2.0])
+    p = ThreadPolicy((1, 2), clock=clock, load=load)
+    for k in range(300):
+        p.next()
+        clock.t += 1e-3
+        p.done()
+        clock.t += 5.0 if k % 100 == 99 else 1e-4
+    assert load.steps == 300 and load.pauses == 1 + 2, (load.steps, load.pauses)
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/stat"), reason="reads Linux's /proc/stat")
+def test_host_load_sees_a_busy_process():
+    """A busy child process on this host takes most of a core: fewer than ncpu - 0.5 spare
+    (it may be scheduled on any core of the set; the host's other load only lowers it)."""
+    import subprocess
+    import sys
+
+    h = HostLoad()
+    busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        time.sleep(0.3)
+        h.observe()
+        time.sleep(0.6)
+        h.observe()
+        room = h.spare()
+    finally:
+        busy.kill()
+        busy.wait()
+    assert room is not None and room <= len(h.cpus) - 0.5, (room, h.cpus)
