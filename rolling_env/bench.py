@@ -500,16 +500,17 @@ class _Workers:
     def __init__(self, kinds: dict, n_envs: int, ticks: int):
         self.procs = {}
         try:
+            self.layer_seconds = {}
+            # one at a time: a worker's first steps (the default's first probes) meet no
+            # other worker's start-up, as a training process starting alone would
             for name, kind in kinds.items():
                 code = _LOAD_WORKER.format(kind=kind, n=n_envs, ticks=ticks)
-                self.procs[name] = subprocess.Popen(
+                p = self.procs[name] = subprocess.Popen(
                     [sys.executable, "-c", code],
                     stdin=subprocess.PIPE,
                     stdout=subprocess.PIPE,
                     text=True,
                 )
-            self.layer_seconds = {}
-            for name, p in self.procs.items():
                 word, *rest = p.stdout.readline().split() or ["failed"]
                 if word != "ready":
                     raise RuntimeError(f"the benchmark worker {name!r} failed to start")
@@ -593,7 +594,7 @@ def threads_under_load(
                         ("batched", "dummy"),
                         sb3_envs,
                         TOP_ROUNDS * sb3_ticks,
-                        max(16, 2048 // sb3_envs),
+                        max(64, 8192 // sb3_envs),
                     )
                     row.update(sb3_batched=s3["batched"], sb3_dummy=s3["dummy"])
             rows.append(row)
@@ -611,7 +612,9 @@ def threads_under_load(
     )
 
 
-_LOAD_SEGMENT = 32  # steps of 256 envs in one segment of the load table (more for fewer envs)
+# steps of 256 envs in one segment of the load table (more for fewer envs): long enough
+# (0.2-0.4 s) that the default's reading of the host's load spans its own steps
+_LOAD_SEGMENT = 128
 
 
 def _load_average() -> float:
