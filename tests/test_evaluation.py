@@ -17,6 +17,22 @@ from agents.evaluate import goal_verdicts, load_agent
 from rolling_env.rollout import rollout
 
 
+def _eval_argv(*scenes, out, runs=None, episodes=1, extra=()):
+    """The command line of agents.evaluate for ``scenes`` (names or paths), without ``--runs``
+    where ``runs`` is None, ending in ``extra``."""
+    runs_args = [] if runs is None else ["--runs", str(runs)]
+    return [
+        "--scenes",
+        *map(str, scenes),
+        *runs_args,
+        "--episodes",
+        str(episodes),
+        "--out",
+        str(out),
+        *extra,
+    ]
+
+
 def test_time_to_goal_is_the_first_evaluation_that_meets_the_goal():
     from agents.evaluate import time_to_goal
 
@@ -123,17 +139,7 @@ def test_evaluate_checks_every_scene_before_writing(tmp_path, capsys):
 
     with pytest.raises(SystemExit) as e:
         evaluate_main(
-            [
-                "--scenes",
-                "heavy_inf_friction",
-                "bogus",
-                "--runs",
-                str(tmp_path),
-                "--episodes",
-                "1",
-                "--out",
-                str(tmp_path / "out"),
-            ]
+            _eval_argv("heavy_inf_friction", "bogus", runs=tmp_path, out=tmp_path / "out")
         )
     assert e.value.code == 2 and "bogus" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
@@ -148,19 +154,7 @@ def test_evaluate_rejects_a_scene_the_baselines_cannot_drive(tmp_path, capsys):
     data = yaml.safe_load((rolling_env.scenes.SCENE_DIR / "default.yaml").read_text())
     slow.write_text(yaml.safe_dump({**data, "omega_R_max": 0.1}))
     with pytest.raises(SystemExit) as e:
-        evaluate_main(
-            [
-                "--scenes",
-                "heavy_inf_friction",
-                str(slow),
-                "--runs",
-                str(tmp_path),
-                "--episodes",
-                "1",
-                "--out",
-                str(tmp_path / "out"),
-            ]
-        )
+        evaluate_main(_eval_argv("heavy_inf_friction", slow, runs=tmp_path, out=tmp_path / "out"))
     assert e.value.code == 2 and "omega_R_max" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
 
@@ -207,12 +201,7 @@ def test_evaluate_finds_the_runs_of_a_scene_file(trained_run, tmp_path):
 
     scene, runs = trained_run
     out = tmp_path / "out"
-    assert (
-        evaluate_main(
-            ["--scenes", str(scene), "--runs", str(runs), "--episodes", "1", "--out", str(out)]
-        )
-        == 0
-    )
+    assert evaluate_main(_eval_argv(scene, runs=runs, out=out)) == 0
     text = (out / "comparison.csv").read_text()
     assert "ppo_seed0" in text, f"the trained agent was not evaluated:\n{text}"
     assert (out / "plots" / "myscene.png").exists()
@@ -243,8 +232,8 @@ def test_evaluate_model_choice_and_seed_summary(trained_run, tmp_path, capsys):
     ]
     for model, name in (("final", "model.zip"), ("best", "best_model.zip")):
         out = tmp_path / model
-        argv = ["--scenes", str(scene), "--runs", str(mine), "--episodes", "2", "--out", str(out)]
-        assert evaluate_main(argv + ([] if model == "final" else ["--model", model])) == 0
+        extra = [] if model == "final" else ["--model", model]
+        assert evaluate_main(_eval_argv(scene, runs=mine, out=out, episodes=2, extra=extra)) == 0
         err = capsys.readouterr().err
         assert "ppo_seed10 has no model" in err and "not evaluated" in err, err
         with open(out / "comparison.csv") as f:
@@ -293,18 +282,7 @@ def test_evaluate_refuses_runs_not_trained_on_the_scene(trained_run, tmp_path, c
     cfg_path.write_text(yaml.safe_dump(cfg))
     out = tmp_path / "out"
     with pytest.raises(SystemExit) as e:
-        evaluate_main(
-            [
-                "--scenes",
-                str(scene),
-                "--runs",
-                str(tmp_path / "runs"),
-                "--episodes",
-                "1",
-                "--out",
-                str(out),
-            ]
-        )
+        evaluate_main(_eval_argv(scene, runs=tmp_path / "runs", out=out))
     assert e.value.code == 2
     assert len(__import__("re").findall(match, capsys.readouterr().err)) == 1
     assert not [p for p in out.rglob("*") if p.is_file()], "files written before the check"
@@ -401,16 +379,7 @@ def test_custom_scene_file_named_like_a_shipped_one_is_not_taken_for_it(
         f"config.yml must name the scene file trained on, got {cfg['env_kwargs']}"
     )
     shutil.copytree(run, tmp_path / "runs" / "default" / "ppo_seed0")  # moved by hand
-    argv = [
-        "--scenes",
-        "default",
-        "--runs",
-        str(tmp_path / "runs"),
-        "--episodes",
-        "1",
-        "--out",
-        str(tmp_path / "out"),
-    ]
+    argv = _eval_argv("default", runs=tmp_path / "runs", out=tmp_path / "out")
     with pytest.raises(SystemExit) as e:
         evaluate_main(argv)
     err = capsys.readouterr().err
@@ -437,18 +406,7 @@ def test_evaluate_refuses_a_run_whose_scene_file_changed(trained_run, tmp_path, 
         tmp_path / "scenes" / "myscene.yaml", base="heavy_inf_friction", runner_mass=0.01
     )
     with pytest.raises(SystemExit) as e:
-        evaluate_main(
-            [
-                "--scenes",
-                str(edited),
-                "--runs",
-                str(tmp_path / "runs"),
-                "--episodes",
-                "1",
-                "--out",
-                str(tmp_path / "out"),
-            ]
-        )
+        evaluate_main(_eval_argv(edited, runs=tmp_path / "runs", out=tmp_path / "out"))
     err = capsys.readouterr().err
     assert e.value.code == 2 and "content differs" in err and "runner_mass" in err, err
 
@@ -527,21 +485,7 @@ def test_a_run_trained_on_other_numerics_is_evaluated_and_marked(trained_run, tm
     sc = rolling_env.scenes.load_scene(str(scene))
     assert sc.sub_steps == "auto" and sc.n_sub != 4 and sc.resolution == 64
     out = tmp_path / "out"
-    assert (
-        evaluate_main(
-            [
-                "--scenes",
-                str(scene),
-                "--runs",
-                str(tmp_path / "runs"),
-                "--episodes",
-                "1",
-                "--out",
-                str(out),
-            ]
-        )
-        == 0
-    )
+    assert evaluate_main(_eval_argv(scene, runs=tmp_path / "runs", out=out)) == 0
     note = f"sub_steps 4 (now auto: {sc.n_sub}), resolution 12 (now 64)"
     err = capsys.readouterr().err
     assert err.count("trained on other numerics or reward weights") == 2 and note in err, err
@@ -593,21 +537,7 @@ def test_a_run_trained_with_other_reward_weights_is_evaluated_and_marked(
         yaml.safe_dump(dict(cfg, env_kwargs=dict(cfg["env_kwargs"], w_final=10.0)))
     )
     out = tmp_path / "out"
-    assert (
-        evaluate_main(
-            [
-                "--scenes",
-                str(scene),
-                "--runs",
-                str(tmp_path / "runs"),
-                "--episodes",
-                "1",
-                "--out",
-                str(out),
-            ]
-        )
-        == 0
-    )
+    assert evaluate_main(_eval_argv(scene, runs=tmp_path / "runs", out=out)) == 0
     md = (out / "comparison.md").read_text()
     assert "* [1] trained on other numerics or reward weights: w_final 10 (now 0)\n" in md, md
     assert "| myscene | ppo_seed0 [1] | model.zip |" in md, md
@@ -637,16 +567,7 @@ def test_a_run_trained_on_other_physics_or_task_stays_refused(
     run = tmp_path / "runs" / "myscene" / "ppo_seed0"
     shutil.copytree(runs / "myscene" / "ppo_seed0", run)
     cfg = _as_if_trained_on(run, **changes)
-    argv = [
-        "--scenes",
-        str(scene),
-        "--runs",
-        str(tmp_path / "runs"),
-        "--episodes",
-        "1",
-        "--out",
-        str(tmp_path / "out"),
-    ]
+    argv = _eval_argv(scene, runs=tmp_path / "runs", out=tmp_path / "out")
     with pytest.raises(SystemExit) as e:
         evaluate_main(argv)
     err = capsys.readouterr().err
@@ -817,18 +738,7 @@ def test_a_scene_that_cannot_be_built_is_one_line_naming_its_keys(tmp_path, caps
 
     huge = _scene_file(tmp_path / "huge.yaml", resolution=4096, stroke_roll=0.9)
     with pytest.raises(SystemExit) as e:
-        evaluate_main(
-            [
-                "--scenes",
-                str(huge),
-                "--runs",
-                str(tmp_path / "runs"),
-                "--episodes",
-                "1",
-                "--out",
-                str(tmp_path / "out"),
-            ]
-        )
+        evaluate_main(_eval_argv(huge, runs=tmp_path / "runs", out=tmp_path / "out"))
     err = capsys.readouterr().err
     assert e.value.code == 2, err
     last = err.strip().splitlines()[-1]
@@ -904,17 +814,7 @@ def test_evaluate_refuses_duplicate_scenes(tmp_path, capsys):
     shipped = str(rolling_env.scenes.SCENE_DIR / "default.yaml")
     for scenes in (["default", "default"], ["default", "heavy_inf_friction", shipped]):
         with pytest.raises(SystemExit) as e:
-            evaluate_main(
-                [
-                    "--baselines-only",
-                    "--scenes",
-                    *scenes,
-                    "--episodes",
-                    "1",
-                    "--out",
-                    str(tmp_path / "out"),
-                ]
-            )
+            evaluate_main(_eval_argv(*scenes, out=tmp_path / "out", extra=["--baselines-only"]))
         last = capsys.readouterr().err.strip().splitlines()[-1]
         assert e.value.code == 2 and "--scenes:" in last and "same scene key 'default'" in last, (
             f"{scenes}: {last}"
@@ -931,18 +831,7 @@ def test_evaluate_refuses_a_run_named_like_a_baseline(trained_run, tmp_path, cap
     scene, runs = trained_run
     shutil.copytree(runs / "myscene" / "ppo_seed0", tmp_path / "runs" / "myscene" / "eq32-feedback")
     with pytest.raises(SystemExit) as e:
-        evaluate_main(
-            [
-                "--scenes",
-                str(scene),
-                "--runs",
-                str(tmp_path / "runs"),
-                "--episodes",
-                "1",
-                "--out",
-                str(tmp_path / "out"),
-            ]
-        )
+        evaluate_main(_eval_argv(scene, runs=tmp_path / "runs", out=tmp_path / "out"))
     err = capsys.readouterr().err
     assert e.value.code == 2 and "has the name of a baseline" in err, err
 
@@ -1020,18 +909,7 @@ def test_damaged_run_files_are_one_line_naming_the_file(trained_run, tmp_path, c
         assert code == 2 and err.count("\n") == 1, f"{kind}: exit {code}: {err}"
         assert err.startswith("rolling-drive rollout: error:") and name in err, f"{kind}: {err}"
     with pytest.raises(SystemExit) as e:
-        evaluate_main(
-            [
-                "--scenes",
-                str(scene),
-                "--runs",
-                str(tmp_path / "runs"),
-                "--episodes",
-                "1",
-                "--out",
-                str(out),
-            ]
-        )
+        evaluate_main(_eval_argv(scene, runs=tmp_path / "runs", out=out))
     last = capsys.readouterr().err.strip().splitlines()[-1]
     assert e.value.code == 2 and name in last and "Traceback" not in last, f"{kind}: {last}"
     assert not [p for p in out.rglob("*") if p.is_file()], f"{kind}: files written"
