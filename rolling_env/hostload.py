@@ -9,11 +9,13 @@ those cores can hold.
 Measured over windows of the caller's steps (``observe`` at each step's start; a window spans
 at least ``MIN_WINDOW`` seconds and no pause of the caller's, so that what runs while the
 caller waits, another process taking its turn, say, does not count): the busy time of this
-process's cores (user, nice, system, irq, softirq and steal: time another virtual machine took
-counts as taken) less this process's own CPU time (all its threads, numba's workers
-included), in cores.  Where
-``/proc/stat`` cannot be read (not Linux) ``spare`` returns None and the policy probes as
-before.
+process's cores (user, system, irq, softirq and steal: time another virtual machine took
+counts as taken; niced processes' time does not, they yield a core to ours) less this
+process's own CPU time (all its threads, numba's workers included; child processes count as
+others), in cores.  A reading is valid for ``LIFE`` seconds.  The CPU set is the process's
+affinity when the reader is built; a CPU quota (cgroup ``cpu.max``) is not read.  Where
+``/proc/stat`` cannot be read (not Linux, or a CPU of the set missing from it) ``spare``
+returns None and the policy probes as before.
 """
 
 from __future__ import annotations
@@ -23,7 +25,9 @@ import time
 
 __all__ = ["HostLoad"]
 
-_BUSY_FIELDS = (0, 1, 2, 5, 6, 7)  # user nice system (idle iowait) irq softirq steal
+# user (nice idle iowait) system irq softirq steal: niced processes yield a core to ours, so
+# their time does not count as taken; guest time is already in user
+_BUSY_FIELDS = (0, 2, 5, 6, 7)
 
 
 def _cpus() -> tuple:
@@ -40,6 +44,7 @@ class HostLoad:
     (tests)."""
 
     MIN_WINDOW = 0.1  # seconds: /proc/stat counts in ticks of 10 ms per core (+-0.1 each)
+    LIFE = 2.0  # seconds a reading stays valid (a caller that pauses often takes few)
 
     def __init__(
         self, path="/proc/stat", clock=time.monotonic, cpu_time=time.process_time, cpus=None
@@ -54,6 +59,7 @@ class HostLoad:
         except (AttributeError, ValueError, OSError):
             self._hz = 100.0
         self.value = None  # the latest reading
+        self._value_t = 0.0  # when it was taken
         self._open = None  # the open window's start: (clock, busy seconds, own CPU seconds)
         self._off = self._busy() is None  # counters unreadable: never read again
 
@@ -67,6 +73,8 @@ class HostLoad:
         busy, seen = 0, 0
         for line in text.splitlines():
             name, _, rest = line.partition(" ")
+            if not name.startswith("cpu"):
+                break  # the per-CPU lines come first
             if name in self._names:
                 fields = rest.split()
                 try:
@@ -101,9 +109,12 @@ class HostLoad:
             t1, busy1, own1 = new
             others = max((busy1 - busy0) - (own1 - own0), 0.0) / (t1 - t0)
             self.value = max(len(self.cpus) - others, 0.0)
+            self._value_t = t1
         self._open = new
 
     def spare(self):
         """Idle cores of the CPU set, less what this process used, over the latest window
-        (None: unknown, or not measured yet)."""
+        (None: unknown, not measured yet, or measured more than ``LIFE`` seconds ago)."""
+        if self.value is None or self.clock() - self._value_t > self.LIFE:
+            return None
         return self.value

@@ -22,7 +22,7 @@ path step by step from what it measures: it runs the faster of the serial kernel
 threaded kernel (at 2, 4, ... up to the calling thread's numba thread count), and now and then
 times a few steps of the others, the time from one step's start to the next, so that the
 Python work between steps counts too.  The probes of a slower path are spaced so that they
-cost at most ``ThreadPolicy.BUDGET`` of the time, and a thread count is not probed at all while
+cost at most ``ThreadPolicy.BUDGET`` of the time, and a larger thread count is not probed while
 other processes leave too few of this process's cores idle (``rolling_env.hostload``, from
 Linux's CPU counters over the caller's recent steps): on a busy host threads lose, and each
 probe would cost a few slow steps.  Transitions are bit-identical on every path,
@@ -229,6 +229,7 @@ class ThreadPolicy:
     # at least (see _settled)
     RETURNS = 5  # recent costs of the way back from a probe kept (their median counts)
     ROOM = 0.5  # k threads are probed while at least k - ROOM cores are spare (see _no_room)
+    LOAD_GAP = 0.05  # seconds between steps that end the host load's window (see next)
 
     def __init__(self, choices, clock=time.perf_counter, load=None):
         self.choices = tuple(int(k) for k in choices)
@@ -237,6 +238,8 @@ class ThreadPolicy:
         self.clock = clock
         self.load = load  # a HostLoad, or None: probe whatever the host's load
         self.gated = 0  # probes put off for want of spare cores
+        self._top = max(self.choices)
+        self._held = [0] * len(self.choices)  # step before which a put-off probe waits
         self._kernels = [_kernel_for(k) for k in self.choices]
         n = len(self.choices)
         self.estimate = [math.nan] * n  # seconds per step of each choice, as last measured
@@ -284,8 +287,11 @@ class ThreadPolicy:
                 self._add(step)  # the common case, kept short
             else:
                 self._record(prev, step, timed)
-        if self.load is not None:
-            self.load.observe(end is None or paused)
+        # the host's load matters only while a larger thread count may be probed; the
+        # caller's own work between steps is its own CPU time, so only a long gap (a
+        # learner's update, another process's turn) ends the window
+        if self.load is not None and self.choices[self.current] < self._top:
+            self.load.observe(end is None or gap > self.LOAD_GAP)
         if self.probing is not None:
             seconds, timed = self._probe
             if (timed >= self.PROBE and seconds >= self.SPAN) or (
@@ -322,7 +328,8 @@ class ThreadPolicy:
         the other processes left fewer than ``threads - ROOM`` cores of this process's CPU
         set idle over the latest window of steps (``load``, a ``HostLoad``), so its threads
         would wait for cores.  It is then due again ``MIN_STEPS`` steps later.  A probe of
-        fewer threads, or without a reading, always runs."""
+        fewer threads, one without a reading, and the urgent probe of the choice just left
+        (``_watch_step``) always run."""
         k = self.choices[j]
         if self.load is None or k <= self.choices[self.current] or j == self._urgent:
             return False
@@ -330,7 +337,7 @@ class ThreadPolicy:
         if room is None or room >= k - self.ROOM:
             return False
         self.gated += 1
-        self._due[j] = self.steps + self.MIN_STEPS
+        self._held[j] = self._due[j] = self.steps + self.MIN_STEPS
         self._next_due = min(d for i, d in enumerate(self._due) if i != self.current)
         return True
 
@@ -454,6 +461,8 @@ class ThreadPolicy:
                     due = self._left[j] + math.ceil(cost / (self.GUARD_BUDGET * t))
                 else:
                     due = self._left[j] + max(self.MIN_STEPS, math.ceil(cost / (self.BUDGET * t)))
+            if j != self._urgent:
+                due = max(due, self._held[j])
             self._due[j] = due
             nearest = min(nearest, due)
         self._next_due = nearest
