@@ -44,7 +44,7 @@ class HostLoad:
     (tests)."""
 
     MIN_WINDOW = 0.1  # seconds: /proc/stat counts in ticks of 10 ms per core (+-0.1 each)
-    LIFE = 2.0  # seconds a reading stays valid (a caller that pauses often takes few)
+    LIFE = 10.0  # seconds a reading stays valid (a caller that pauses often takes few)
 
     def __init__(
         self, path="/proc/stat", clock=time.monotonic, cpu_time=time.process_time, cpus=None

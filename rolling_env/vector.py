@@ -238,7 +238,6 @@ class ThreadPolicy:
         self.clock = clock
         self.load = load  # a HostLoad, or None: probe whatever the host's load
         self.gated = 0  # probes put off for want of spare cores
-        self._top = max(self.choices)
         self._held = [0] * len(self.choices)  # step before which a put-off probe waits
         self._kernels = [_kernel_for(k) for k in self.choices]
         n = len(self.choices)
@@ -287,10 +286,10 @@ class ThreadPolicy:
                 self._add(step)  # the common case, kept short
             else:
                 self._record(prev, step, timed)
-        # the host's load matters only while a larger thread count may be probed; the
-        # caller's own work between steps is its own CPU time, so only a long gap (a
-        # learner's update, another process's turn) ends the window
-        if self.load is not None and self.choices[self.current] < self._top:
+        # read on every choice, so that the reading is current when the load drives the
+        # policy off the threads; the caller's own work between steps is its own CPU time,
+        # so only a long gap (a learner's update, another process's turn) ends the window
+        if self.load is not None:
             self.load.observe(end is None or gap > self.LOAD_GAP)
         if self.probing is not None:
             seconds, timed = self._probe
