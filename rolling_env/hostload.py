@@ -38,19 +38,17 @@ def _cpus() -> tuple:
 
 
 class HostLoad:
-    """``spare()``: cores of this process's CPU set that other processes left idle over the
-    latest window of steps (``observe``), or None where not known.  ``path``, ``clock``,
+    """``spare(now)``: cores of this process's CPU set that other processes left idle over the
+    latest window of steps (``observe``), or None where not known.  Times (``now``, seconds)
+    come from the caller's clock, which its steps are timed with already.  ``path``,
     ``cpu_time`` (this process's CPU seconds) and ``cpus`` (the CPU set) can be replaced
     (tests)."""
 
     MIN_WINDOW = 0.1  # seconds: /proc/stat counts in ticks of 10 ms per core (+-0.1 each)
     LIFE = 10.0  # seconds a reading stays valid (a caller that pauses often takes few)
 
-    def __init__(
-        self, path="/proc/stat", clock=time.monotonic, cpu_time=time.process_time, cpus=None
-    ):
+    def __init__(self, path="/proc/stat", cpu_time=time.process_time, cpus=None):
         self.path = path
-        self.clock = clock
         self.cpu_time = cpu_time
         self.cpus = _cpus() if cpus is None else tuple(cpus)
         self._names = {f"cpu{c}" for c in self.cpus}
@@ -84,13 +82,13 @@ class HostLoad:
                 seen += 1
         return busy / self._hz if seen == len(self._names) else None
 
-    def _sample(self):
+    def _sample(self, now: float):
         busy = self._busy()
-        return None if busy is None else (self.clock(), busy, self.cpu_time())
+        return None if busy is None else (now, busy, self.cpu_time())
 
-    def observe(self, paused: bool = False) -> None:
-        """A step starts (``paused``: after a pause of the caller's, whose time says nothing
-        about the steps).  Closes the window opened at an earlier step once it spans
+    def observe(self, now: float, paused: bool = False) -> None:
+        """A step starts at ``now`` (``paused``: after a pause of the caller's, whose time
+        says nothing about the steps).  Closes the window opened at an earlier step once it spans
         ``MIN_WINDOW`` seconds, and opens the next; a pause drops the open window, so that a
         window spans the caller's steps only."""
         if self._off:
@@ -98,9 +96,9 @@ class HostLoad:
         if paused:
             self._open = None
             return
-        if self._open is not None and self.clock() - self._open[0] < self.MIN_WINDOW:
+        if self._open is not None and now - self._open[0] < self.MIN_WINDOW:
             return
-        new = self._sample()
+        new = self._sample(now)
         if new is None:
             self._off, self.value = True, None
             return
@@ -112,9 +110,10 @@ class HostLoad:
             self._value_t = t1
         self._open = new
 
-    def spare(self):
+    def spare(self, now: float):
         """Idle cores of the CPU set, less what this process used, over the latest window
-        (None: unknown, not measured yet, or measured more than ``LIFE`` seconds ago)."""
-        if self.value is None or self.clock() - self._value_t > self.LIFE:
+        (None: unknown, not measured yet, or measured more than ``LIFE`` seconds before
+        ``now``)."""
+        if self.value is None or now - self._value_t > self.LIFE:
             return None
         return self.value

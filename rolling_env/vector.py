@@ -290,7 +290,7 @@ class ThreadPolicy:
         # policy off the threads; the caller's own work between steps is its own CPU time,
         # so only a long gap (a learner's update, another process's turn) ends the window
         if self.load is not None:
-            self.load.observe(end is None or gap > self.LOAD_GAP)
+            self.load.observe(now, end is None or gap > self.LOAD_GAP)
         if self.probing is not None:
             seconds, timed = self._probe
             if (timed >= self.PROBE and seconds >= self.SPAN) or (
@@ -304,7 +304,7 @@ class ThreadPolicy:
             and self._fresh >= self.PROBE
         ):
             j = min((d, j) for j, d in enumerate(self._due) if j != self.current)[1]
-            if self._no_room(j):
+            if self._no_room(j, now):
                 return self._pick(prev, now)
             self.estimate[self.current] = self._window_sum / len(self._window)
             self.probing = j
@@ -322,22 +322,22 @@ class ThreadPolicy:
         self.steps += 1
         return pick
 
-    def _no_room(self, j: int) -> bool:
+    def _no_room(self, j: int, now: float) -> bool:
         """Whether a probe of choice j, more threads than the current choice, is put off:
         the other processes left fewer than ``threads - ROOM`` cores of this process's CPU
         set idle over the latest window of steps (``load``, a ``HostLoad``), so its threads
-        would wait for cores.  It is then due again ``MIN_STEPS`` steps later.  A probe of
+        would wait for cores.  It is then due no sooner than ``MIN_STEPS`` steps later.  A probe of
         fewer threads, one without a reading, and the urgent probe of the choice just left
         (``_watch_step``) always run."""
         k = self.choices[j]
         if self.load is None or k <= self.choices[self.current] or j == self._urgent:
             return False
-        room = self.load.spare()
+        room = self.load.spare(now)
         if room is None or room >= k - self.ROOM:
             return False
         self.gated += 1
-        self._held[j] = self._due[j] = self.steps + self.MIN_STEPS
-        self._next_due = min(d for i, d in enumerate(self._due) if i != self.current)
+        self._held[j] = self.steps + self.MIN_STEPS
+        self._plan()
         return True
 
     def done(self) -> None:

@@ -442,11 +442,11 @@ class _Load:
     def __init__(self, room):
         self.room, self.steps, self.pauses = room, 0, 0
 
-    def observe(self, paused=False):
+    def observe(self, now, paused=False):
         self.steps += 1
         self.pauses += paused
 
-    def spare(self):
+    def spare(self, now):
         return self.room[0]
 
 
@@ -518,36 +518,36 @@ def test_host_load_counts_the_other_processes_cores(tmp_path):
     stat = tmp_path / "stat"
     t, own = [0.0], [0.0]
     _stat(stat, 1000, 5000)
-    h = HostLoad(path=str(stat), clock=lambda: t[0], cpu_time=lambda: own[0], cpus=(0, 1))
+    h = HostLoad(path=str(stat), cpu_time=lambda: own[0], cpus=(0, 1))
     h._hz = 100.0
-    h.observe()  # opens the first window
-    assert h.spare() is None, "nothing measured yet"
+    h.observe(t[0])  # opens the first window
+    assert h.spare(t[0]) is None, "nothing measured yet"
     _stat(stat, 1075, 5025)  # each CPU: 75 more busy ticks
     t[0], own[0] = 1.0, 0.4
-    h.observe()
-    assert h.spare() == pytest.approx(0.9, abs=1e-9), h.spare()
+    h.observe(t[0])
+    assert h.spare(t[0]) == pytest.approx(0.9, abs=1e-9), h.spare(t[0])
     _stat(stat, 2000, 9000)  # too soon: counters not read, the window stays open
     t[0] = 1.0 + 0.5 * HostLoad.MIN_WINDOW
-    h.observe()
-    assert h.spare() == pytest.approx(0.9, abs=1e-9)
+    h.observe(t[0])
+    assert h.spare(t[0]) == pytest.approx(0.9, abs=1e-9)
     _stat(stat, 1075, 5125)  # all idle since t = 1
     t[0], own[0] = 2.0, 0.4
-    h.observe()
-    assert h.spare() == pytest.approx(2.0, abs=1e-9)
+    h.observe(t[0])
+    assert h.spare(t[0]) == pytest.approx(2.0, abs=1e-9)
     _stat(stat, 1175, 5125)  # this process alone kept both busy: nothing taken by others
     t[0], own[0] = 3.0, 2.4
-    h.observe()
-    assert h.spare() == pytest.approx(2.0, abs=1e-9)
+    h.observe(t[0])
+    assert h.spare(t[0]) == pytest.approx(2.0, abs=1e-9)
     _stat(stat, 1375, 5125)  # others busy during the caller's pause: not counted
     t[0] = 5.0
-    h.observe(paused=True)
+    h.observe(t[0], paused=True)
     _stat(stat, 1385, 5215)  # then 0.1 of a core each over 1 s: 0.2 taken
     t[0] = 5.1
-    h.observe()
+    h.observe(t[0])
     _stat(stat, 1395, 5305)
     t[0] = 6.1
-    h.observe()
-    assert h.spare() == pytest.approx(1.8, abs=1e-9), h.spare()
+    h.observe(t[0])
+    assert h.spare(t[0]) == pytest.approx(1.8, abs=1e-9), h.spare(t[0])
 
 
 def test_policy_gates_only_larger_thread_counts():
@@ -566,27 +566,28 @@ def test_host_load_reading_expires(tmp_path):
     stat = tmp_path / "stat"
     t = [0.0]
     _stat(stat, 1000, 5000)
-    h = HostLoad(path=str(stat), clock=lambda: t[0], cpu_time=lambda: 0.0, cpus=(0, 1))
+    h = HostLoad(path=str(stat), cpu_time=lambda: 0.0, cpus=(0, 1))
     h._hz = 100.0
-    h.observe()
+    h.observe(t[0])
     _stat(stat, 1050, 5050)
     t[0] = 1.0
-    h.observe()
-    assert h.spare() == pytest.approx(1.0, abs=1e-9)
+    h.observe(t[0])
+    assert h.spare(t[0]) == pytest.approx(1.0, abs=1e-9)
     t[0] = 1.0 + HostLoad.LIFE + 0.01
-    assert h.spare() is None
+    assert h.spare(t[0]) is None
 
 
 def test_host_load_unreadable_counters_read_as_unknown(tmp_path):
     h = HostLoad(path=str(tmp_path / "missing"))
-    h.observe()
-    h.observe()
-    assert h.spare() is None
+    h.observe(0.0)
+    h.observe(1.0)
+    assert h.spare(1.0) is None
     stat = tmp_path / "stat"
     _stat(stat, 10, 10, cpus=(0,))
-    h = HostLoad(path=str(stat), cpus=(0, 1), clock=lambda: 0.0)
-    h.observe()
-    assert h.spare() is None, "a CPU of the set missing"
+    h = HostLoad(path=str(stat), cpus=(0, 1))
+    h.observe(0.0)
+    h.observe(1.0)
+    assert h.spare(1.0) is None, "a CPU of the set missing"
 
 
 def test_policy_tells_the_load_of_each_step_and_its_pauses():
@@ -618,16 +619,16 @@ def test_host_load_sees_a_busy_process():
     import sys
 
     h = HostLoad()
-    h.observe()
+    h.observe(time.perf_counter())
     if h._off:
         pytest.skip("/proc/stat does not list this process's CPUs")
     busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
     try:
         time.sleep(0.3)
-        h.observe()
+        h.observe(time.perf_counter())
         time.sleep(0.6)
-        h.observe()
-        room = h.spare()
+        h.observe(time.perf_counter())
+        room = h.spare(time.perf_counter())
     finally:
         busy.kill()
         busy.wait()
