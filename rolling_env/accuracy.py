@@ -3,7 +3,9 @@
 Per scene, the standard episodes are run at the shipped settings (``rolling_env.make(scene)``)
 and their actions recorded: one episode of the Eq. 32 feedback baseline, one of the Eq. 32
 open-loop baseline, and ``episodes_random`` episodes of uniform random actions (pre-sampled
-from ``numpy.random.default_rng(seed)``).  Each action sequence is then replayed open loop,
+from ``numpy.random.default_rng(seed)``), and optionally one deterministic episode of each
+trained agent given (the first seed of each configuration under a runs folder, kind
+``agent``).  Each action sequence is then replayed open loop,
 so that no feedback can hide a drift, at the shipped settings (timed: steps per second) and at
 two refined levels: sub-steps x K with the grid (cells per contact radius) x G, and sub-steps
 x 2K with the grid x 2G.  The two levels differ by a factor 2 in both, and their final runner
@@ -37,7 +39,7 @@ ORDER = 2.0  # assumed order of the error in the refinement factor (Richardson)
 DEFAULT_REFINE = 8  # K: sub-steps x K and x 2K at the two reference levels
 DEFAULT_GRID = 4  # G: the grid (resolution) x G and x 2G at the two reference levels
 TIMING_REPEATS = 3  # the shipped replay is timed this often; the fastest run counts
-KINDS = ("eq32-feedback", "eq32-open-loop", "random")
+KINDS = ("eq32-feedback", "eq32-open-loop", "random", "agent")
 
 
 def shipped_numerics(env) -> tuple[int, float]:
@@ -115,13 +117,19 @@ class _Sequence:
 
 
 def record(
-    scene, kind: str, seed: int = 0, actions: np.ndarray | None = None, overrides=None
+    scene,
+    kind: str,
+    seed: int = 0,
+    actions: np.ndarray | None = None,
+    overrides=None,
+    model: str | None = None,
 ) -> dict:
     """One episode of ``kind`` at the shipped settings: its actions (float32, as the
     controllers give them), final x* [m], total slip work [J] and target [m].  ``random``
-    plays ``actions`` (pre-sampled)."""
+    plays ``actions`` (pre-sampled); ``agent`` the trained ``model`` (an SB3 .zip, loaded by
+    ``rollout.make_controller``, deterministic)."""
     from .baselines import Eq32Feedback, Eq32OpenLoop
-    from .rollout import rollout
+    from .rollout import make_controller, rollout
 
     env = _make(scene, overrides=overrides)
     if kind == "eq32-feedback":
@@ -130,6 +138,8 @@ def record(
         ctrl = Eq32OpenLoop.from_env(env)
     elif kind == "random":
         ctrl = _Sequence(actions)
+    elif kind == "agent":
+        ctrl = make_controller(str(model), env, seed=seed, scene=scene)
     else:
         raise ValueError(f"episode kind must be one of {', '.join(KINDS)}, got {kind!r}")
     data = rollout(env, ctrl, seed=seed)
@@ -255,8 +265,12 @@ def scene_accuracy(
     level_factors=None,
     order: float = ORDER,
     timing_repeats: int = TIMING_REPEATS,
+    models=(),
 ) -> dict:
     """The accuracy table of one scene (name, YAML path or dict; see the module docstring).
+
+    ``models``: (label, path) pairs of trained agents (SB3 .zip) whose deterministic
+    episodes are recorded and replayed like the others (kind ``agent``).
 
     ``overrides`` apply to every env built (the shipped one and the references), e.g.
     ``{"episode_steps": 64}`` for a quick check.  ``level_factors``: the two reference levels
@@ -278,10 +292,14 @@ def scene_accuracy(
     for i in range(episodes_random):
         label = "random" if episodes_random == 1 else f"random {i + 1}"
         plan.append(("random", label, rng.uniform(-1.0, 1.0, (steps, 3)).astype(np.float32)))
+    plan += [("agent", label, path) for label, path in models]
 
     episodes = []
-    for kind, label, acts in plan:
-        rec = record(scene, kind, seed, acts, overrides)
+    for kind, label, arg in plan:
+        if kind == "agent":
+            rec = record(scene, kind, seed, overrides=overrides, model=arg)
+        else:
+            rec = record(scene, kind, seed, arg, overrides)
         shipped = replay(scene, rec["actions"], seed, overrides=overrides, repeats=timing_repeats)
         refs = [replay(scene, rec["actions"], seed, s, r, overrides) for s, r in abs_levels]
         episodes.append(episode_result(kind, label, rec, shipped, refs, ratio, order, sc.tolerance))
@@ -299,11 +317,23 @@ def scene_accuracy(
     }
 
 
-def run(scenes, **kw) -> dict:
-    """``scene_accuracy`` of each scene: ``{"scenes": [...], "seconds": total}``."""
+def run(scenes, models=None, **kw) -> dict:
+    """``scene_accuracy`` of each scene: ``{"scenes": [...], "seconds": total}``;
+    ``models`` maps a scene (as given) to its (label, path) pairs of agents."""
     t = time.perf_counter()
-    res = [scene_accuracy(s, **kw) for s in scenes]
+    res = [scene_accuracy(s, models=(models or {}).get(s, ()), **kw) for s in scenes]
     return {"scenes": res, "seconds": time.perf_counter() - t}
+
+
+def agent_models(runs_dir, scene_name: str) -> list[tuple[str, str]]:
+    """The first seed of every agent configuration committed for a scene: (run folder name,
+    its ``model.zip``) for each ``runs_dir/<scene_name>/<config>_seed0/model.zip``, in name
+    order; none where the scene has no runs."""
+    from pathlib import Path
+
+    folder = Path(runs_dir) / scene_name
+    found = sorted(folder.glob("*_seed0/model.zip")) if folder.is_dir() else []
+    return [(p.parent.name, str(p)) for p in found]
 
 
 # ----------------------------------------------------------------------------- output
@@ -325,15 +355,16 @@ def table(res: dict) -> str:
         f"of (sub_steps, resolution) = {lv}; tolerance {res['tolerance']:g} m, "
         f"{res['episode_steps']} steps, seed {res['seed']}"
     )
+    w = max([16] + [len(e["label"]) for e in res["episodes"]])
     lines = [
         head,
-        f"  {'episode':16s} {'x* error':>12s} {'slip error':>11s} {'steps/s':>9s}"
+        f"  {'episode':{w}s} {'x* error':>12s} {'slip error':>11s} {'steps/s':>9s}"
         f"   reference uncertainty (x*, slip)",
-        f"  {'':16s} {'[tol]':>12s} {'[%]':>11s}",
+        f"  {'':{w}s} {'[tol]':>12s} {'[%]':>11s}",
     ]
     for e in res["episodes"]:
         lines.append(
-            f"  {e['label']:16s} {e['xstar_error_tol']:12.4g} "
+            f"  {e['label']:{w}s} {e['xstar_error_tol']:12.4g} "
             f"{_f(e['slip_error_pct'], '+.2f', width=11)} {e['steps_per_s']:9.0f}"
             f"   {_unc(e)}"
         )

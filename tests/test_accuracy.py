@@ -161,6 +161,7 @@ def test_richardson_second_order():
         (["--scene", "default", "--refine", "100000"], "--refine: the reference level"),
         (["--scene", "default", "--refine-grid", "1024"], "--refine-grid: the reference level"),
         (["--scene", "default", "--out", "{file}/report.md"], "--out: cannot write"),
+        (["--scene", "default", "--agents", "{dir}/none"], "--agents: no such folder"),
     ],
 )
 def test_bad_flags_exit_2_in_one_line_naming_the_flag(argv, name, tmp_path, capsys, monkeypatch):
@@ -211,3 +212,32 @@ def test_all_writes_one_report_of_every_scene(tmp_path, capsys, monkeypatch):
     text = out.read_text()
     assert text.startswith("# Accuracy") and "## default" in text
     assert "rolling-drive accuracy --all --refine 1 --refine-grid 1" in text
+
+
+def test_agents_add_one_episode_per_configuration(tmp_path, capsys):
+    """``--agents RUNS`` adds a deterministic episode of the seed-0 run of every configuration
+    in ``RUNS/<scene>/``: its replay at the shipped settings is the recording itself, it is
+    compared with the refined levels like the others, and a run folder of another seed or
+    without a model adds nothing."""
+    import shutil
+    from pathlib import Path
+
+    src = Path(__file__).resolve().parents[1] / "results" / "agents" / "default"
+    runs = tmp_path / "runs" / "default"
+    for name in ("ppo_seed0", "ppo_seed1", "sac_seed0"):
+        shutil.copytree(src / name, runs / name)
+    (runs / "td3_seed0").mkdir()  # no model.zip
+    argv = ["accuracy", "--scene", "default", "--agents", str(tmp_path / "runs")]
+    argv += ["--refine", "1", "--refine-grid", "1", "--episode-steps", "16"]
+    assert main([*argv, "--episodes-random", "0", "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    eps = {e["label"]: e for e in r["episodes"]}
+    assert list(eps) == ["eq32-feedback", "eq32-open-loop", "ppo_seed0", "sac_seed0"], list(eps)
+    for label in ("ppo_seed0", "sac_seed0"):
+        e = eps[label]
+        assert e["kind"] == "agent" and e["steps"] == 16 and e["replay_exact"], e
+        # the shipped default is within 0.1 tolerance of its reference on agents' episodes
+        # (measured 1e-3 over these 16 ticks)
+        assert 0.0 < e["xstar_error_tol"] < 0.1, e
+    assert eps["ppo_seed0"]["xstar_shipped"] != eps["sac_seed0"]["xstar_shipped"]
+    assert A.agent_models(tmp_path / "runs", "resonant") == []

@@ -16,7 +16,8 @@ def register(sub):
         help="error of the env at a scene's shipped settings against "
         "a refined reference, and its steps/s",
         description="Run the scene's standard episodes at its shipped settings "
-        "(Eq. 32 feedback, Eq. 32 open loop, uniform random actions), replay each "
+        "(Eq. 32 feedback, Eq. 32 open loop, uniform random actions, and with --agents "
+        "one of each trained agent configuration), replay each "
         "action sequence open loop at two refined levels (sub-steps x K and 2K, "
         "grid x G and 2G), extrapolate them (Richardson, assumed second order) "
         "and print the shipped env's final-position error in tolerances, its "
@@ -61,6 +62,13 @@ def register(sub):
         help="episode length (default: the scene's own; shorter for a quick check)",
     )
     p.add_argument(
+        "--agents",
+        default=None,
+        metavar="RUNS",
+        help="also an episode of each trained agent configuration: the seed-0 run's "
+        "model.zip of every RUNS/<scene>/<config>_seed0 (e.g. results/agents)",
+    )
+    p.add_argument(
         "--out",
         type=file_path("out"),
         default=None,
@@ -81,6 +89,7 @@ def _command(args) -> str:
         ("--episodes-random", args.episodes_random, 1),
         ("--seed", args.seed, 0),
         ("--episode-steps", args.episode_steps, None),
+        ("--agents", args.agents, None),
     ):
         if val != default:
             parts.append(f"{flag} {val}")
@@ -90,11 +99,15 @@ def _command(args) -> str:
 
 
 def _run(args):
-    from ..accuracy import check_levels, check_scene, report, run, table
+    from pathlib import Path
+
+    from ..accuracy import agent_models, check_levels, check_scene, report, run, table
     from ..io import check_writable, write_text
-    from ..scenes import list_scenes
+    from ..scenes import list_scenes, load_scene
 
     scenes = list_scenes() if args.all else [args.scene]
+    if args.agents is not None and not Path(args.agents).is_dir():
+        raise ValueError(f"--agents: no such folder {args.agents!r}")
     overrides = None if args.episode_steps is None else {"episode_steps": args.episode_steps}
     # every scene and level is built once before any episode runs: a bad value fails at
     # once, naming its flag
@@ -111,9 +124,14 @@ def _run(args):
                 check_levels(scene, factors, overrides)
             except ValueError as e:
                 raise ValueError(f"--{flag}: {e}") from None
+    models = {}
+    if args.agents is not None:
+        for scene in scenes:
+            models[scene] = agent_models(args.agents, load_scene(scene).name)
     out = None if args.out is None else check_writable(args.out)
     res = run(
         scenes,
+        models=models,
         refine=args.refine,
         grid=args.refine_grid,
         episodes_random=args.episodes_random,
