@@ -17,11 +17,9 @@ order much less).
 
 The grid is refined too, by G = 4 by default, not 2: on random actions, which reverse the
 rolling and change the load every tick, the grid error of x* is first order, and grids x2 /
-x4 left 0.5 tolerance between the levels on heavy_inf_friction, x4 / x8 0.03.  With K = 256
-(sub-steps x 256 and x 512) every shipped scene took 28 s together on the 2-core machine
-(kernel of 0e58eef); there `light_stiff`, whose runner period the backward-Euler step needs
-thousands of sub-steps per tick to resolve, kept an uncertainty of 1.5 tolerances on x*:
-the uncertainty column says where a larger K is needed.
+x4 left 0.5 tolerance between the levels on heavy_inf_friction, x4 / x8 0.03.  With the
+default K = 8 the shipped scenes' reference uncertainties stay below 0.01 tolerance on x*
+(results/env_accuracy.md); the uncertainty column says where a larger K is needed.
 
 The shipped sub-steps and resolution are read from the built env, never from the scene file
 (a scene may resolve them when it is built); every level passes both explicitly.
