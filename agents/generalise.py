@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import csv
 import io
-import math
 import sys
 from pathlib import Path
 
@@ -46,22 +45,13 @@ from .evaluate import (
 )
 
 SHIPPED = ("default", "heavy_inf_friction", "light_stiff", "loaded", "resonant")
-FACTORS = {"mu": (0.5, 2.0), "runner_mass": (0.5, 2.0), "F_ext": (0.5, 1.5)}
+FACTORS = rolling_env.scenes.VARIANT_FACTORS
 COMPARED = 20  # targets per scene in results/comparison.md
 
 
 def variants(scene) -> list[tuple[str, dict]]:
-    """(label, overrides) of the held-out variants of ``scene``: mu where finite, the mass,
-    the load where there is one."""
-    sc = rolling_env.scenes.load_scene(scene)
-    out = []
-    for key, factors in FACTORS.items():
-        x = getattr(sc, key)
-        if not math.isfinite(x) or x == 0:
-            continue
-        for f in factors:
-            out.append((f"{key} x{f:g}", {key: x * f}))
-    return out
+    """(label, overrides) of the held-out variants of ``scene`` (``scenes.variants``)."""
+    return rolling_env.scenes.variants(scene)
 
 
 def _nominal_controllers(scene: str, runs: Path, model: str = "final") -> dict:

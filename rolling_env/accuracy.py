@@ -264,11 +264,14 @@ def scene_accuracy(
     order: float = ORDER,
     timing_repeats: int = TIMING_REPEATS,
     models=(),
+    variant: str | None = None,
 ) -> dict:
     """The accuracy table of one scene (name, YAML path or dict; see the module docstring).
 
     ``models``: (label, path) pairs of trained agents (SB3 .zip) whose deterministic
-    episodes are recorded and replayed like the others (kind ``agent``).
+    episodes are recorded and replayed like the others (kind ``agent``).  ``variant``: the
+    label of the physics ``overrides`` change (a held-out variant, ``scenes.variants``),
+    reported beside the scene's name.
 
     ``overrides`` apply to every env built (the shipped one and the references), e.g.
     ``{"episode_steps": 64}`` for a quick check.  ``level_factors``: the two reference levels
@@ -303,6 +306,7 @@ def scene_accuracy(
         episodes.append(episode_result(kind, label, rec, shipped, refs, ratio, order, sc.tolerance))
     return {
         "scene": sc.name,
+        "variant": variant,
         "tolerance": sc.tolerance,
         "episode_steps": steps,
         "seed": seed,
@@ -315,12 +319,25 @@ def scene_accuracy(
     }
 
 
-def run(scenes, models=None, **kw) -> dict:
+def run(scenes, models=None, variants: bool = False, overrides=None, **kw) -> dict:
     """``scene_accuracy`` of each scene: ``{"scenes": [...], "seconds": total}``;
-    ``models`` maps a scene (as given) to its (label, path) pairs of agents."""
+    ``models`` maps a scene (as given) to its (label, path) pairs of agents; ``variants``
+    runs each scene's held-out variants (``scenes.variants``) instead of the scene."""
+    from .scenes import variants as scene_variants
+
     t = time.perf_counter()
-    res = [scene_accuracy(s, models=(models or {}).get(s, ()), **kw) for s in scenes]
+    res = []
+    for s in scenes:
+        ms = (models or {}).get(s, ())
+        plan = scene_variants(s) if variants else [(None, {})]
+        for label, ov in plan:
+            o = {**(overrides or {}), **ov} or None
+            res.append(scene_accuracy(s, models=ms, overrides=o, variant=label, **kw))
     return {"scenes": res, "seconds": time.perf_counter() - t}
+
+
+def _title(res: dict) -> str:
+    return res["scene"] if not res.get("variant") else f"{res['scene']} {res['variant']}"
 
 
 def agent_models(runs_dir, scene_name: str) -> list[tuple[str, str]]:
@@ -348,7 +365,7 @@ def table(res: dict) -> str:
     """The human table of one scene's result."""
     lv = ", ".join(f"({lev['sub_steps']}, {lev['resolution']:g})" for lev in res["levels"])
     head = (
-        f"{res['scene']}: shipped sub_steps {res['shipped']['sub_steps']}, resolution "
+        f"{_title(res)}: shipped sub_steps {res['shipped']['sub_steps']}, resolution "
         f"{res['shipped']['resolution']:g}; reference Richardson (order {res['order']:g}) "
         f"of (sub_steps, resolution) = {lv}; tolerance {res['tolerance']:g} m, "
         f"{res['episode_steps']} steps, seed {res['seed']}"
@@ -391,10 +408,17 @@ def report(results: list[dict], command: str, seconds: float) -> str:
         f"{TIMING_REPEATS}); the reference levels' speeds follow.",
         "",
     ]
+    if any(r.get("variant") for r in results):
+        lines += [
+            "Each section is a held-out variant of a shipped scene: one physics key scaled "
+            "(`rolling_env.scenes.variants`), every other key and the numerics rule as shipped "
+            "(`sub_steps: auto` follows the changed physics; the grid is the scene's).",
+            "",
+        ]
     for res in results:
         lv = [f"({lev['sub_steps']}, {lev['resolution']:g})" for lev in res["levels"]]
         lines += [
-            f"## {res['scene']}",
+            f"## {_title(res)}",
             "",
             f"Shipped: {res['shipped']['sub_steps']} sub-steps per tick, "
             f"{res['shipped']['resolution']:g} cells per contact radius; reference levels "

@@ -417,6 +417,26 @@ _UniqueKeyLoader.add_implicit_resolver(  # copied per class by PyYAML: SafeLoade
 )
 
 
+#: held-out variants of a scene: one physics key scaled by each factor (where finite and
+#: nonzero), the physics no controller was designed or trained for
+VARIANT_FACTORS = {"mu": (0.5, 2.0), "runner_mass": (0.5, 2.0), "F_ext": (0.5, 1.5)}
+
+
+def variants(scene) -> list[tuple[str, dict]]:
+    """(label, overrides) of the held-out variants of ``scene`` (``VARIANT_FACTORS``): the
+    friction coefficient where finite, the runner's mass, the load where there is one; the
+    label names the key and its factor (``"mu x2"``)."""
+    sc = load_scene(scene)
+    out = []
+    for key, factors in VARIANT_FACTORS.items():
+        x = getattr(sc, key)
+        if not math.isfinite(x) or x == 0:
+            continue
+        for f in factors:
+            out.append((f"{key} x{f:g}", {key: x * f}))
+    return out
+
+
 def read_yaml(path, what: str = "scene file"):
     """The YAML document in ``path``; a syntax error, a duplicate key (``_UniqueKeyLoader``),
     text that is not UTF-8 or a file that cannot be read is a one-line ValueError naming

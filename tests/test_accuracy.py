@@ -33,6 +33,7 @@ EPISODE_KEYS = {
 }
 SCENE_KEYS = {
     "scene",
+    "variant",
     "tolerance",
     "episode_steps",
     "seed",
@@ -241,3 +242,23 @@ def test_agents_add_one_episode_per_configuration(tmp_path, capsys):
         assert 0.0 < e["xstar_error_tol"] < 0.1, e
     assert eps["ppo_seed0"]["xstar_shipped"] != eps["sac_seed0"]["xstar_shipped"]
     assert A.agent_models(tmp_path / "runs", "resonant") == []
+
+
+def test_variants_run_each_held_out_variant_with_its_physics(capsys):
+    """``--variants`` runs, instead of the scene, each of its held-out variants (one physics
+    key scaled), labelled so; the short episodes' override and the variant's key both reach
+    the env: the two loads end the same open-loop actions at different runner positions."""
+    from rolling_env.scenes import variants
+
+    argv = ["accuracy", "--scene", "loaded", "--variants", "--refine", "1", "--refine-grid"]
+    argv += ["1", "--episode-steps", "8", "--episodes-random", "0", "--json"]
+    assert main(argv) == 0
+    r = json.loads(capsys.readouterr().out)
+    want = [label for label, _ in variants("loaded")]
+    assert [s["variant"] for s in r["scenes"]] == want, r["scenes"]
+    assert {s["scene"] for s in r["scenes"]} == {"loaded"}
+    by = {s["variant"]: s for s in r["scenes"]}
+    for s in r["scenes"]:
+        assert all(e["steps"] == 8 and e["replay_exact"] for e in s["episodes"]), s
+    x_lo, x_hi = (by[v]["episodes"][1]["xstar_shipped"] for v in ("F_ext x0.5", "F_ext x1.5"))
+    assert x_lo != x_hi, "the load variants ran the same physics"

@@ -62,6 +62,12 @@ def register(sub):
         help="episode length (default: the scene's own; shorter for a quick check)",
     )
     p.add_argument(
+        "--variants",
+        action="store_true",
+        help="instead of each scene, its held-out variants: mu x0.5 and x2 where finite, "
+        "runner mass x0.5 and x2, load x0.5 and x1.5 where there is one",
+    )
+    p.add_argument(
         "--agents",
         default=None,
         metavar="RUNS",
@@ -89,9 +95,12 @@ def _command(args) -> str:
         ("--episodes-random", args.episodes_random, 1),
         ("--seed", args.seed, 0),
         ("--episode-steps", args.episode_steps, None),
+        ("--variants", args.variants, False),
         ("--agents", args.agents, None),
     ):
-        if val != default:
+        if val is True:
+            parts.append(flag)
+        elif val != default:
             parts.append(f"{flag} {val}")
     if args.out is not None:
         parts.append(f"--out {args.out}")
@@ -132,6 +141,7 @@ def _run(args):
     res = run(
         scenes,
         models=models,
+        variants=args.variants,
         refine=args.refine,
         grid=args.refine_grid,
         episodes_random=args.episodes_random,
@@ -142,5 +152,5 @@ def _run(args):
     if out is not None:
         write_text(out, report(res["scenes"], _command(args), res["seconds"]))
         human += f"\n\nwrote {out}"
-    emit(res if args.all else res["scenes"][0], args.json, human)
+    emit(res if args.all or args.variants else res["scenes"][0], args.json, human)
     return 0
