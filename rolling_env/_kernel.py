@@ -939,7 +939,14 @@ def _commit(W, i0, i1, j0, j1, dxdt, s, inv_dx, mu, mass, edges, census, drift):
         Ut = W[W_A, i] + Bi * s
         if mu is not None:
             Li = W[W_L + L_LIMIT, i]
-            q = (Li - 0.5 * (drift[0] + drift[1] * float(i))) * inv_dx
+            dLi = drift[0] + drift[1] * float(i)
+            # a cell that starts inside its limit slides only after its content meets the
+            # limit, at tau of the sub-step (content and limit both straight in time): its
+            # slip work takes the mean limit over (tau, 1), not over the whole sub-step
+            a0 = W[W_A, i] if Ut > 0.0 else -W[W_A, i]
+            den = (abs(Ut) - Li) - (a0 - (Li - dLi))
+            tau = min(max((Li - dLi - a0) / den if den > 0.0 else 0.0, 0.0), 1.0)
+            q = (Li - 0.5 * dLi * (1.0 - tau)) * inv_dx
             if edges is not None:
                 qm = W[W_L + L_QLIM, i]
                 q = q if inner else qm

@@ -145,16 +145,23 @@ def _commit_reference(W, i0, i1, j0, j1, dxdt, s, inv_dx, mass):
     """Plain-Python commit of cells i0..i1 (finite friction): inner cells j0..j1 with B = dx dt
     and overlap dx, edge cells with the build pass's B and limit per unit overlap q; a content
     beyond its limit slides to it (slip work (|U| - L) q, none for a cell out of contact; q:
-    an inner cell's mean of its start and end limits over dx, the start limit being its end
-    limit less ``DRIFT``)."""
+    an inner cell's mean of its limit over dx from the time its content meets it, the start
+    limit being its end limit less ``DRIFT``)."""
     W = W.copy()
     T1 = Ta = slip = 0.0
     for i in range(i0, i1 + 1):
         inner = j0 <= i <= j1
         Bi = dxdt if inner else W[K.W_B, i]
         Li = W[K.W_L + K.L_LIMIT, i]
-        q = (Li - 0.5 * (DRIFT[0] + DRIFT[1] * i)) * inv_dx if inner else W[K.W_L + K.L_QLIM, i]
         Ut = W[K.W_A, i] + Bi * s
+        q = W[K.W_L + K.L_QLIM, i]
+        if inner:
+            dL = DRIFT[0] + DRIFT[1] * i
+            a0 = math.copysign(1.0, Ut) * W[K.W_A, i]  # start content on the side it ends
+            tau = 0.0
+            if abs(Ut) > Li and a0 < Li - dL:  # starts inside: slides once it meets the limit
+                tau = (Li - dL - a0) / ((abs(Ut) - Li) - (a0 - (Li - dL)))
+            q = (Li - 0.5 * dL * (1.0 - tau)) * inv_dx
         if abs(Ut) > Li:
             slip += (abs(Ut) - Li) * q
             Ut = math.copysign(Li, Ut)
@@ -209,6 +216,40 @@ def test_commit_of_every_cell_matches_a_plain_reference(i0, i1, j0, j1, mass):
         assert n_pos + n_neg > 0, "no cell of the case slid to its limit"
     if i0 <= 5 <= i1 and i0 <= 7 <= i1:
         assert n_pos > 0 and n_neg > 0, f"slid: {n_pos} positive, {n_neg} negative"
+
+
+@pytest.mark.parametrize(
+    "a, b, L0, L1",
+    [
+        (0.2, 0.9, 0.5, 0.3),  # starts stuck, meets its falling limit a third into the sub-step
+        (-0.5, 0.9, 0.5, 0.3),  # starts at the other limit (creep reversal)
+        (0.5, 0.9, 0.5, 0.3),  # at its limit throughout: the trapezoid of the limit
+        (-0.1, -0.8, 0.2, 0.6),  # negative side, rising limit
+    ],
+)
+def test_inner_cell_slip_work_is_the_exact_integral_over_its_sliding_part(a, b, L0, L1):
+    """An inner cell whose content moves straight from a to b (unclipped) over a sub-step while
+    its limit goes straight from L0 to L1 slides from the moment the content meets the limit;
+    its slip work is the integral of the limit times the slid distance: against the continuum
+    cell integrated in 2e5 time steps, to 1e-4 relative (the commit charges the mean limit of
+    the sliding part; the mean over the whole sub-step is 9-19% off in three of these cases)."""
+    n, inv_dx = 3, 2.0
+    W = np.zeros((K.work_rows(True), n))
+    W[K.W_A, 1] = a
+    W[K.W_L + K.L_LIMIT, 1] = L1
+    drift = np.array([L1 - L0, 0.0])  # the limit's change over the sub-step, alpha + beta i
+    dxdt, s = 1.0, b - a  # A + B s = b
+    _, _, slip, _, _, _ = K._commit(W, 1, 1, 1, 1, dxdt, s, inv_dx, 0.2, None, True, None, drift)
+    m = 200_000
+    lim = L0 + (L1 - L0) * (np.arange(1, m + 1) / m)
+    u, work = a, 0.0
+    for k in range(m):  # the continuum cell: follows the creep, held at +-lim
+        step = (b - a) / m
+        v = u + step
+        c = min(max(v, -lim[k]), lim[k])
+        work += abs(v - c) * lim[k] * inv_dx
+        u = c
+    assert slip == pytest.approx(work, rel=1e-4), f"slip work {slip}, continuum {work}"
 
 
 @pytest.mark.parametrize("edges", [True, None])
