@@ -230,10 +230,12 @@ def test_converge_quick_env_lines(quick_study):
     """The quick study's env lines (the default scene; ``converge.ENV_QUICK_SCENES``): the
     accuracy module's standard episodes replayed at the shipped sub-steps x 1/4 .. 4.  At the
     shipped sub-steps the worst error equals ``rolling_env.accuracy``'s (same episodes, same
-    reference; relative 1e-9).  The slip work error falls from 1/4x to 1x the sub-steps by
-    more than 5x (second order gives (23/6)^2 = 15; measured 8.2, the reference's finer grid
-    sets a floor of about 0.3%); the x* error at the shipped grid is the grid's own: 2x and
-    4x the sub-steps change it by less than 10% (measured 0.085 tolerances at all three)."""
+    reference; relative 1e-9).  The slip work, charged from the onset of sliding within each
+    sub-step, is at the grid's floor from 1/4x the sub-steps on: within 1% at every level
+    (measured 0.70% at 1/4x, 0.49% at 1x) and changed by less than 0.1% of the reference
+    from 1x to 4x (measured 0.008%); charged the limit's mean over the whole sub-step it was
+    6% off at 1/4x.  The x* error at the shipped grid is the grid's own: 2x and 4x the
+    sub-steps change it by less than 10% (measured 0.085 tolerances at all three)."""
     import rolling_env
     from rolling_env import accuracy
 
@@ -257,7 +259,8 @@ def test_converge_quick_env_lines(quick_study):
     assert lines["env_x:default"][s0] == pytest.approx(x_acc, rel=1e-9)
     assert lines["env_slip:default"][s0] == pytest.approx(s_acc, rel=1e-9)
     slip, x = lines["env_slip:default"], lines["env_x:default"]
-    assert slip[want[0]] / slip[s0] > 5.0, f"slip work error vs sub-steps: {slip}"
+    assert max(slip.values()) < 0.01, f"slip work error vs sub-steps: {slip}"
+    assert abs(slip[want[-1]] - slip[s0]) < 1e-3, f"slip work error vs sub-steps: {slip}"
     assert all(abs(x[n] / x[s0] - 1.0) < 0.1 for n in want[3:]), f"x* error: {x}"
 
 
