@@ -30,6 +30,7 @@ import rolling_env
 from rolling_env.cli import positive_int
 from rolling_env.io import staged
 from rolling_env.rollout import rollout
+from rolling_env.scenes import variants
 
 from .common import atomic_write, scene_key
 from .evaluate import (
@@ -45,13 +46,7 @@ from .evaluate import (
 )
 
 SHIPPED = ("default", "heavy_inf_friction", "light_stiff", "loaded", "resonant")
-FACTORS = rolling_env.scenes.VARIANT_FACTORS
 COMPARED = 20  # targets per scene in results/comparison.md
-
-
-def variants(scene) -> list[tuple[str, dict]]:
-    """(label, overrides) of the held-out variants of ``scene`` (``scenes.variants``)."""
-    return rolling_env.scenes.variants(scene)
 
 
 def _nominal_controllers(scene: str, runs: Path, model: str = "final") -> dict:

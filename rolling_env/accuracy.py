@@ -289,18 +289,16 @@ def scene_accuracy(
     env.close()
 
     rng = np.random.default_rng(seed)
-    plan = [("eq32-feedback", "eq32-feedback", None), ("eq32-open-loop", "eq32-open-loop", None)]
+    plan = [("eq32-feedback", "eq32-feedback", {}), ("eq32-open-loop", "eq32-open-loop", {})]
     for i in range(episodes_random):
         label = "random" if episodes_random == 1 else f"random {i + 1}"
-        plan.append(("random", label, rng.uniform(-1.0, 1.0, (steps, 3)).astype(np.float32)))
-    plan += [("agent", label, path) for label, path in models]
+        acts = rng.uniform(-1.0, 1.0, (steps, 3)).astype(np.float32)
+        plan.append(("random", label, {"actions": acts}))
+    plan += [("agent", label, {"model": path}) for label, path in models]
 
     episodes = []
-    for kind, label, arg in plan:
-        if kind == "agent":
-            rec = record(scene, kind, seed, overrides=overrides, model=arg)
-        else:
-            rec = record(scene, kind, seed, arg, overrides)
+    for kind, label, what in plan:
+        rec = record(scene, kind, seed, overrides=overrides, **what)
         shipped = replay(scene, rec["actions"], seed, overrides=overrides, repeats=timing_repeats)
         refs = [replay(scene, rec["actions"], seed, s, r, overrides) for s, r in abs_levels]
         episodes.append(episode_result(kind, label, rec, shipped, refs, ratio, order, sc.tolerance))
