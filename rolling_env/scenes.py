@@ -81,14 +81,13 @@ class Scene:
 
 
 EPISODE_STEPS_MAX = 10**8
-# "auto" sub-steps (``auto_sub_steps``), measured on the shipped scenes' episodes against
-# runs refined in the sub-step (docs/numerics.md): the episode's slip work is off by about
-# C_TRAVEL x (cells the patch crosses per sub-step)^2 with finite friction (1.1-1.7% at one
-# cell: the trailing edge cells), the runner displacement by about C_TRAVEL_STICK x that
-# with infinite friction, and a free runner's slip work and displacement by about C_RUNNER x
-# (omega_n dt)^2 (omega_n on the stuck contact at N_max; the slip work +2.8% at 0.34 rad on
-# the default scene with omega_n/Omega = 10, -2% at 0.36 rad on light_stiff)
-C_TRAVEL = 0.02
+# "auto" sub-steps (``auto_sub_steps``): the episode's slip work and runner displacement are
+# off by at most about C_TRAVEL x (cells the patch crosses per sub-step)^2 with finite
+# friction (the trailing edge's cells, each charged from the onset of its sliding),
+# C_TRAVEL_STICK x that with infinite friction, and by about C_RUNNER x (omega_n dt)^2 for a
+# free runner (omega_n on the stuck contact at N_max).  Upper bounds measured on the shipped
+# scenes' episodes and their held-out variants against refined runs (docs/numerics.md).
+C_TRAVEL = 0.005
 C_TRAVEL_STICK = 0.002
 C_RUNNER = 0.2
 AUTO_SUB_STEPS_MAX = 4096
