@@ -17,6 +17,9 @@ from rolling_env.scenes import (  # noqa: F401  (re-exported: run folders record
     scene_key,
 )
 
+EVAL_SEED = 20261122  # held out: training uses seeds < 1e6, evaluation envs seed + 10000
+MACHINE = "2-core x86_64 CPU, no GPU"  # where the committed runs were trained
+
 ALGOS = ("ppo", "sac", "td3")
 
 
@@ -691,7 +694,7 @@ def save_model(model, vecnorm, folder: str | os.PathLike, name: str = "model") -
     """Save ``<name>.zip`` and, beside it, ``<name>_vecnormalize.pkl`` atomically.  The
     statistics carry the model's step count (``SAVED_AT``): two files cannot be replaced in
     one atomic step, so a process killed between the two writes leaves a pair that
-    ``evaluate.load_agent`` recognises as mismatched instead of silently using it."""
+    ``loading.load_agent`` recognises as mismatched instead of silently using it."""
     folder = Path(folder)
     if vecnorm is not None:
         setattr(vecnorm, SAVED_AT, int(model.num_timesteps))

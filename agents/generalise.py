@@ -32,18 +32,11 @@ from rolling_env.io import staged
 from rolling_env.rollout import rollout
 from rolling_env.scenes import variants
 
-from .common import atomic_write, scene_key
-from .evaluate import (
-    BASELINES,
-    EPISODES_MAX,
-    EVAL_SEED,
-    _budget,
-    _config_key,
-    controllers_for,
-    episode_metrics,
-    held_out_targets,
-    load_agent,
-)
+from .common import EVAL_SEED, atomic_write, scene_key
+from .evaluate import EPISODES_MAX, controllers_for, episode_metrics, held_out_targets
+from .loading import load_agent
+from .report import _budget, _config_key
+from .verdicts import BASELINES
 
 SHIPPED = ("default", "heavy_inf_friction", "light_stiff", "loaded", "resonant")
 COMPARED = 20  # targets per scene in results/comparison.md

@@ -8,7 +8,7 @@ its action tells the policy what it is about to correct.
 
 Training wraps the vector env in ``ResidualVecEnv`` (``agents.train`` does so when the
 hyper-parameter entry has ``residual: <base>`` or with ``--residual <base>``); evaluation and
-``rolling-drive rollout`` wrap the loaded policy in ``ResidualAgent`` (``evaluate.load_agent``
+``rolling-drive rollout`` wrap the loaded policy in ``ResidualAgent`` (``loading.load_agent``
 does so from the run's config.yml).  The baseline is built from the scene the run was trained
 on, so on a held-out variant of a scene the baseline part knows what the agent knows.
 """

@@ -13,7 +13,8 @@ import yaml
 
 import rolling_env
 from agents.baselines import Eq32OpenLoop
-from agents.evaluate import goal_verdicts, load_agent
+from agents.loading import load_agent
+from agents.verdicts import goal_verdicts
 from rolling_env.rollout import rollout
 
 
@@ -34,7 +35,7 @@ def _eval_argv(*scenes, out, runs=None, episodes=1, extra=()):
 
 
 def test_time_to_goal_is_the_first_evaluation_that_meets_the_goal():
-    from agents.evaluate import time_to_goal
+    from agents.verdicts import time_to_goal
 
     base = {"final_abs_error_mean": 1.0e-8, "slip_work_mean": 2.0e-8}
     log = [
@@ -79,7 +80,7 @@ def test_seed_summary_sums_up_runs_that_differ_only_in_their_seed():
     """ppo_seed0..2 are one configuration over three seeds: the mean of the runs' means, their
     range, and the goal met in 2 of 3 (seed 2 has more slip work than the baseline); sac_seed0
     alone and a run not named <name>_seed<N> get no summary row."""
-    from agents.evaluate import seed_summary
+    from agents.report import seed_summary
 
     def row(c, err, slip):
         return dict(
@@ -217,7 +218,7 @@ def test_evaluate_model_choice_and_seed_summary(trained_run, tmp_path, capsys):
     import shutil
 
     from agents.evaluate import main as evaluate_main
-    from agents.evaluate import scene_runs
+    from agents.loading import scene_runs
 
     scene, runs = trained_run
     mine = tmp_path / "runs"
@@ -660,7 +661,7 @@ def test_a_loose_model_zip_is_loaded_with_its_own_algorithm(algo, tmp_path, caps
     are warned about; the rollout CLI runs it."""
     import stable_baselines3 as sb3
 
-    from agents.evaluate import model_algo
+    from agents.loading import model_algo
     from rolling_env.cli import main as cli_main
     from rolling_env.sb3_vec import RollingDriveVecEnv
 
@@ -698,7 +699,7 @@ def test_a_loose_model_zip_is_loaded_with_its_own_algorithm(algo, tmp_path, caps
 def test_a_zip_that_is_no_sb3_model_is_one_line(tmp_path, capsys):
     import zipfile
 
-    from agents.evaluate import model_algo
+    from agents.loading import model_algo
     from rolling_env.cli import main as cli_main
 
     junk = tmp_path / "junk.zip"
@@ -919,7 +920,7 @@ def test_scene_runs_skips_hidden_and_overwrite_folders(tmp_path):
     """The run folders of a scene are its visible subfolders: a hidden one (an earlier run
     that ``--overwrite`` could not delete) and ``<run>.overwrite`` (a replacement that failed
     or was stopped) were evaluated as extra controllers."""
-    from agents.evaluate import scene_runs
+    from agents.loading import scene_runs
 
     base = tmp_path / "runs" / "default"
     for name in ("ppo_seed0", "sac_seed0", ".ppo_seed0.replaced-123", "ppo_seed0.overwrite"):

@@ -141,7 +141,7 @@ def test_bad_period_settings_are_one_line():
 
 
 def test_a_short_period_run_trains_saves_and_evaluates(tmp_path):
-    from agents.evaluate import load_agent
+    from agents.loading import load_agent
     from agents.train import main as train_main
 
     run = tmp_path / "run"

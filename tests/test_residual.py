@@ -8,7 +8,7 @@ import yaml
 
 import rolling_env
 from agents.baselines import Eq32Feedback, Eq32OpenLoop
-from agents.evaluate import load_agent
+from agents.loading import load_agent
 from agents.residual import BASES, ResidualAgent, ResidualVecEnv, augment, check_residual, combine
 from rolling_env.rollout import rollout
 

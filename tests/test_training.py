@@ -17,7 +17,8 @@ import yaml
 
 import rolling_env
 from agents.common import atomic_write, load_hyperparams, parse_kwargs
-from agents.evaluate import agent_file, episode_metrics, held_out_targets, load_agent
+from agents.evaluate import episode_metrics, held_out_targets
+from agents.loading import agent_file, load_agent
 from rolling_env.rollout import rollout
 
 REPO = Path(__file__).resolve().parent.parent
