@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from rolling_env import bench
+from rolling_env import bench_host
 from rolling_env.bench import ratio_bound
 
 
@@ -54,7 +54,7 @@ def test_memory_probe_ignores_the_parents_peak():
     200 MiB (getrusage's ru_maxrss, used before, carries the parent's peak across fork +
     exec)."""
     big = np.ones(50_000_000)
-    code = bench._PEAK + "import numpy\nprint(peak())"
+    code = bench_host._PEAK + "import numpy\nprint(peak())"
     kib = int(
         subprocess.run(
             [sys.executable, "-c", code], capture_output=True, text=True, check=True
@@ -67,11 +67,11 @@ def test_competitor_runs_only_inside_its_block():
     """The busy process of the load conditions runs while the block does and is gone after,
     also when the block raises."""
     with pytest.raises(RuntimeError):
-        with bench._Competitor(True) as c:
+        with bench_host._Competitor(True) as c:
             assert c.proc.poll() is None, "the competing process is not running"
             raise RuntimeError
     assert c.proc.poll() is not None, "the competing process outlived its block"
-    with bench._Competitor(False) as c:
+    with bench_host._Competitor(False) as c:
         assert c.proc is None
 
 
@@ -117,7 +117,7 @@ def test_load_section_reports_ratios_of_the_same_run():
             dict(num_envs=1024, serial=100.0, threaded=185.0, default=180.0),
         ]
     }
-    text = "\n".join(bench._load_section(load, host, sweep))
+    text = "\n".join(bench_host._load_section(load, host, sweep))
     assert "| 100 | 180 | 175 | 1.75 | 1.80 | 2 threads | 1.2 |" in text, text
     assert "| 80 | 20 | 78 | 0.97 | 0.25 | the serial kernel | nan |" in text, text
     assert "| 90 | 30 | 3.00x |" in text and "| 60 | 20 | 3.00x |" in text, text
@@ -128,7 +128,7 @@ def test_load_workers_step_their_envs_on_command():
     """The load table's envs, each in its own process: a step command makes its steps (the
     policy's numpy work between them too) and says what the env steps on; the processes are
     gone after close."""
-    w = bench._Workers({"serial": "1", "default": "None", "dummy": "dummy"}, 2, 16)
+    w = bench_host._Workers({"serial": "1", "default": "None", "dummy": "dummy"}, 2, 16)
     try:
         assert set(w.layer_seconds) == {"serial", "default", "dummy"}
         seconds, threads = w.go("serial", 5, 2)
