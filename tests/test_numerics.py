@@ -3,7 +3,7 @@
 
 Tolerances, tiered: 1e-4 (in omega R) for zero lines that are exact in the continuum and
 grid-limited at 32 springs per a1 (measured ~1e-5); 1% of the work put in for the energy ledger
-(``stability.RESID_TOL``); exact zeros for released springs (the kernel sets them to 0.0).
+(``stability_checks.RESID_TOL``); exact zeros for released springs (the kernel sets them to 0.0).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from rolling_env import analytic, converge, figures, stability
+from rolling_env import analytic, converge, figures, stability, stability_cases
 from rolling_env import experiments as ex
 from rolling_env.cli import main
 
@@ -40,7 +40,7 @@ def test_all_outputs_finite(stability_rows):
 
 def test_energy_never_created(stability_rows):
     """Ledger residual > -1% of the work put in where it is checked (-1e-3 for the cases at
-    env settings, ``stability.RESID_TOL_ENV``); the state energy (elastic + kinetic) never
+    env settings, ``stability_env.RESID_TOL_ENV``); the state energy (elastic + kinetic) never
     exceeds the work put in, at any step."""
     for r in stability_rows:
         assert r["state_ok"], f"{r['case']}: state energy exceeds the work put in"
@@ -64,7 +64,7 @@ def test_env_runner_tends_to_the_massless_limit(stability_rows):
 def test_liftoff_releases_every_spring(mu, r):
     """N = 0 for one tick in the middle of a forth step: every cell content exactly 0, T = 0,
     N = 0 (tolerance: exact), and the contact re-forms on the next tick."""
-    x = stability.liftoff(mu, r)
+    x = stability_cases.liftoff(mu, r)
     assert x["U_max"] == 0.0, f"max |U| = {x['U_max']} after lift-off (must be exactly 0)"
     failed = [k for k, v in x["checks"].items() if not v]
     assert not failed, f"lift-off checks failed (mu {mu}, r {r}): {failed}"
@@ -75,7 +75,7 @@ def test_liftoff_releases_every_spring(mu, r):
 def test_long_run_stays_finite_and_steady():
     """2e4 ticks through one Drive.run call: finite, energy not created, no drift of the mean
     runner velocity (last 10% vs middle, 2%)."""
-    x = stability.long_run(20_000)
+    x = stability_cases.long_run(20_000)
     assert x["finite"], "non-finite output in a 2e4-tick run"
     assert x["state_ok"], "state energy exceeds the work put in"
     assert x["residual"] > -stability.RESID_TOL, f"energy residual {x['residual']:.3g}"
@@ -87,7 +87,7 @@ def test_long_run_stays_finite_and_steady():
 def test_substep_refinement_converges():
     """1 .. 1000 sub-steps per half period: successive differences of the mean runner velocity
     strictly decrease; the ledger closes to 1% at the finest step."""
-    x = stability.substep_sweep((1, 10, 100, 1000))
+    x = stability_cases.substep_sweep((1, 10, 100, 1000))
     d = x["diffs"]
     assert all(b < a for a, b in zip(d, d[1:])), f"differences do not shrink: {d}"
     assert x["residuals"][-1] > -stability.RESID_TOL, f"residuals {x['residuals']}"
