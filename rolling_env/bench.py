@@ -186,7 +186,8 @@ def batched(n_envs=256, ticks=200, single_steps=20_000, sizes=BATCH_SIZES):
 
     from .sb3_vec import RollingDriveVecEnv
     from .scenes import load_scene
-    from .vector import BatchCore, _threaded_step, max_threads
+    from .threads import _threaded_step, max_threads
+    from .vector import BatchCore
 
     episode = load_scene().episode_steps  # the default scene's
     most = max_threads()
@@ -576,6 +577,6 @@ def _ratio_bound(b) -> list:
 
 
 def _parallel_min():
-    from .vector import PARALLEL_MIN_ENVS
+    from .threads import PARALLEL_MIN_ENVS
 
     return PARALLEL_MIN_ENVS

@@ -165,7 +165,7 @@ def threads_under_load(
     ``RollingDriveVecEnv`` (default threading) vs a ``DummyVecEnv`` of single envs, both in
     ``VecMonitor``."""
     from .scenes import load_scene
-    from .vector import max_threads
+    from .threads import max_threads
 
     episode = load_scene().episode_steps  # the default scene's
     most = max_threads()

@@ -18,13 +18,13 @@ import rolling_env  # noqa: F401  (registers RollingDrive-v0)
 import rolling_env._envkernel as EK
 from rolling_env.hostload import HostLoad
 from rolling_env.sb3_vec import RollingDriveVecEnv
-from rolling_env.vector import (
+from rolling_env.threads import (
     PARALLEL_MIN_ENVS,
-    BatchCore,
     ThreadPolicy,
     max_threads,
     thread_choices,
 )
+from rolling_env.vector import BatchCore
 
 THREADS = min(2, max_threads())
 two_threads = pytest.mark.skipif(max_threads() < 2, reason="numba runs one thread here")

@@ -13,12 +13,8 @@ import pytest
 import rolling_env
 import rolling_env._envkernel as EK
 from rolling_env.sb3_vec import RollingDriveVecEnv
-from rolling_env.vector import (
-    PARALLEL_MIN_ENVS,
-    BatchCore,
-    ThreadPolicy,
-    max_threads,
-)
+from rolling_env.threads import PARALLEL_MIN_ENVS, ThreadPolicy, max_threads
+from rolling_env.vector import BatchCore
 
 STEPS = 40  # with max_episode_steps = 15: crosses two episode boundaries
 THREADS = min(2, max_threads())  # the threaded kernel's thread count in these tests
