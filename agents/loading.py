@@ -95,7 +95,7 @@ def load_agent(path, env=None, base_scene=None):
 
     from rolling_env.env import OBS_NAMES
 
-    from .common import parse_kwargs
+    from .hyperparams import parse_kwargs
     from .period import N_ACTION as N_PERIOD_ACTION
     from .residual import N_BASE, ResidualAgent, ResidualVecEnv
 

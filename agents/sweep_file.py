@@ -11,7 +11,8 @@ from pathlib import Path
 
 import yaml
 
-from .common import ALGOS, check_hyperparams, load_hyperparams, scene_key
+from .common import ALGOS, load_hyperparams, scene_key
+from .hyperparams import check_hyperparams
 
 PROG = "python -m agents.sweep"
 # keys of a sweep file, with their defaults (None: none, or computed)

@@ -42,11 +42,8 @@ from rolling_env.cli import positive_int
 
 from .common import (
     ALGOS,
-    action_noise,
     atomic_write,
     buildable_scene,
-    check_hyperparams,
-    check_policy,
     load_hyperparams,
     make_vec_env,
     save_model,
@@ -54,6 +51,7 @@ from .common import (
     scene_fields,
     scene_key,
 )
+from .hyperparams import action_noise, check_hyperparams, check_policy
 from .residual import BASES as RESIDUAL_BASES
 from .residual import SCALE_DEFAULT as RESIDUAL_SCALE
 from .residual import ResidualVecEnv

@@ -7,7 +7,7 @@ import pytest
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 import rolling_env
-from agents.common import check_hyperparams
+from agents.hyperparams import check_hyperparams
 from agents.period import HOLD, PeriodAgent, PeriodExcitation, PeriodVecEnv
 from rolling_env.baselines import Eq32Design
 from rolling_env.rollout import rollout

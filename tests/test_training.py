@@ -16,8 +16,9 @@ import pytest
 import yaml
 
 import rolling_env
-from agents.common import atomic_write, load_hyperparams, parse_kwargs
+from agents.common import atomic_write, load_hyperparams
 from agents.evaluate import episode_metrics, held_out_targets
+from agents.hyperparams import parse_kwargs
 from agents.loading import agent_file, load_agent
 from rolling_env.rollout import rollout
 
@@ -549,7 +550,7 @@ def test_policy_kwargs_as_a_yaml_mapping_resolves_torch_names():
     and an unknown one is refused naming the key."""
     import torch
 
-    from agents.common import check_hyperparams
+    from agents.hyperparams import check_hyperparams
 
     hp = check_hyperparams(
         "sac",
@@ -630,7 +631,7 @@ def test_shipped_policy_kwargs_and_valid_ones_pass():
     """The shipped configs, and valid values of every kind the check knows, pass unchanged."""
     import torch
 
-    from agents.common import check_hyperparams
+    from agents.hyperparams import check_hyperparams
 
     for algo in ("ppo", "sac", "td3"):
         for key in ("RollingDrive-v0", *rolling_env.list_scenes()):
@@ -656,7 +657,7 @@ def test_exponent_numbers_in_hyperparameter_yaml(tmp_path):
     for scene files and run configs) reads them as floats, as YAML 1.2 does; n_timesteps 1e3
     is the integer 1000, 1.5e0 for an integer is still refused, and lin_2e-1 stays a string
     (a schedule)."""
-    from agents.common import check_hyperparams
+    from agents.hyperparams import check_hyperparams
     from agents.train import _setup, build_parser
 
     conf = tmp_path / "ppo.yml"
