@@ -19,6 +19,11 @@ from rolling_env.scenes import (  # noqa: F401  (re-exported: run folders record
 EVAL_SEED = 20261122  # held out: training uses seeds < 1e6, evaluation envs seed + 10000
 MACHINE = "2-core x86_64 CPU, no GPU"  # where the committed runs were trained
 
+
+class UsageError(ValueError):
+    """A bad scene, hyper-parameter or argument, found before training starts."""
+
+
 ALGOS = ("ppo", "sac", "td3")
 
 

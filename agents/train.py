@@ -27,7 +27,6 @@ import argparse
 import json
 import os
 import platform
-import re
 import shlex
 import shutil
 import signal
@@ -42,6 +41,7 @@ from rolling_env.cli import positive_int
 
 from .common import (
     ALGOS,
+    UsageError,
     atomic_write,
     buildable_scene,
     load_hyperparams,
@@ -55,6 +55,8 @@ from .hyperparams import action_noise, check_hyperparams, check_policy
 from .residual import BASES as RESIDUAL_BASES
 from .residual import SCALE_DEFAULT as RESIDUAL_SCALE
 from .residual import ResidualVecEnv
+from .run_folder import RUN_MARKER, _not_a_run, _replace_run, staging_folder
+from .vec_choice import VEC_ENVS, choose_vec_env
 
 SEED_MAX = 2**31 - 1 - 10_000  # the evaluation env is seeded seed + 10000
 #: thread settings recorded in meta.json (none changes a transition; torch runs on one thread)
@@ -295,11 +297,6 @@ def _eval_callback(
     )
 
 
-class UsageError(ValueError):
-    """A bad scene, hyper-parameter or argument, found before training starts."""
-
-
-VEC_ENVS = ("batched", "dummy")  # the kinds of common.make_vec_env
 GOAL_LOG = "eval_goal.json"  # final errors and slip work of the periodic evaluations
 
 
@@ -319,65 +316,6 @@ def num_threads_arg(text):
             f"num-threads must be 'auto' or an integer in [1, {hi}], got {text!r}"
         )
     return x
-
-
-def measure_vec_envs(
-    scene, n_envs: int, env_kwargs, num_threads=None, seconds=1.0, rounds=3
-) -> dict:
-    """Env steps/s of each kind of training vector env (``VEC_ENVS``) here and now: random
-    actions, timed passes of the kinds in turn (``rounds`` rounds, ``seconds`` in all), the
-    best pass of each counting.  The batched env's own thread choice settles in the untimed
-    warm-up."""
-    import numpy as np
-
-    acts = np.random.default_rng(0).uniform(-1, 1, (64, n_envs, 3)).astype(np.float32)
-    envs = {
-        k: make_vec_env(scene, n_envs, 0, env_kwargs, kind=k, num_threads=num_threads)
-        for k in VEC_ENVS
-    }
-    best = dict.fromkeys(envs, 0.0)
-    try:
-        for env in envs.values():
-            env.reset()
-            for a in acts[:32]:
-                env.step(a)
-        span = seconds / (rounds * len(envs))
-        for _ in range(rounds):
-            for k, env in envs.items():
-                steps, t0 = 0, time.perf_counter()
-                while (t := time.perf_counter() - t0) < span:
-                    env.step(acts[steps % len(acts)])
-                    steps += 1
-                best[k] = max(best[k], steps * n_envs / t)
-    finally:
-        for env in envs.values():
-            env.close()
-    return best
-
-
-def choose_vec_env(
-    flag: str, scene, n_envs: int, env_kwargs, num_threads=None, measure=measure_vec_envs
-):
-    """The training vector env's kind and what decided it: ``flag`` ("auto" or one of
-    ``VEC_ENVS``); for "auto" the faster of ``measure(scene, n_envs, env_kwargs,
-    num_threads)`` (env steps/s per kind).  Returns (kind, record for meta.json)."""
-    if flag != "auto":
-        return flag, {"kind": flag, "chosen_by": "--vec-env"}
-    from rolling_env.scenes import load_scene
-
-    kw = {k: v for k, v in dict(env_kwargs or {}).items() if k != "scene"}
-    if load_scene(scene, **kw).randomize:  # the batched envs step one physics only
-        return "dummy", {
-            "kind": "dummy",
-            "chosen_by": "the scene draws its physics per episode (randomize): single envs",
-        }
-    rates = measure(scene, n_envs, env_kwargs, num_threads)
-    kind = max(VEC_ENVS, key=lambda k: rates[k])
-    return kind, {
-        "kind": kind,
-        "chosen_by": "measured at start",
-        "env_steps_per_s": {k: round(rates[k]) for k in VEC_ENVS},
-    }
 
 
 def _wrap_actions(env, eval_env, checked: dict, hp: dict):
@@ -519,101 +457,6 @@ def _setup(args, command=None):
     command = command or "python -m agents.train " + shlex.join(sys.argv[1:])
     atomic_write(work / "command.txt", lambda p: Path(p).write_text(command + "\n"))
     return model, eval_env, run, work, n_envs, n_timesteps, trained, vec_env
-
-
-def staging_folder(run: Path) -> Path:
-    """Where ``--overwrite`` trains before it replaces ``run``: ``<run>.overwrite`` beside it
-    (a stopped or failed run's files, its checkpoint among them, stay there)."""
-    return run.with_name(run.name + ".overwrite")
-
-
-def _replace_run(run: Path, work: Path) -> None:
-    """Put the finished run in ``work`` in place of the earlier run ``run`` (checked again by
-    ``_not_a_run``: it may have changed while training): two renames with SIGINT and SIGTERM
-    held back between them, then the earlier run is deleted (a failure there only warns).
-    Where the earlier run may not be replaced any more, both are kept and a UsageError says
-    where the new one is."""
-    if not run.exists() and not run.is_symlink():  # deleted while training
-        os.rename(work, run)
-        return
-    why = _not_a_run(run)
-    if why:
-        raise UsageError(
-            f"the new run is complete in {str(work)!r}, but {str(run)!r} {why} "
-            "now (changed while training): nothing was deleted"
-        )
-    old = run.with_name(f".{run.name}.replaced-{os.getpid()}")
-    held = {signal.SIGINT, signal.SIGTERM}
-    mask = getattr(signal, "pthread_sigmask", lambda how, sigs: None)  # POSIX only
-    mask(signal.SIG_BLOCK, held)
-    try:
-        os.rename(run, old)
-        try:
-            os.rename(work, run)
-        except BaseException:
-            os.rename(old, run)
-            raise
-    finally:
-        mask(signal.SIG_UNBLOCK, held)
-    try:  # signals no longer held: deleting a large tb/ takes a while
-        shutil.rmtree(old)
-    except OSError as e:  # the new run is in place: warn, leave the hidden folder
-        print(
-            f"python -m agents.train: warning: the new run is in {str(run)!r}, but the "
-            f"earlier run left in {str(old)!r} could not be deleted ({e.strerror or e})",
-            file=sys.stderr,
-        )
-
-
-RUN_MARKER = "rolling-drive-run.txt"  # written when the script creates a run folder
-RUN_FILES = re.compile(  # what the script (and SB3's TensorBoard logger) writes in a run folder
-    r"^(config\.yml|command\.txt|meta\.json|evaluations\.npz|eval_goal\.json|tb|"
-    r"\.eval_scratch|"
-    + re.escape(RUN_MARKER)
-    + r"|(model|best_model|checkpoint)(\.zip|_vecnormalize\.pkl)|"
-    r"\.(config|command|meta|evaluations|eval_goal|model|best_model|checkpoint)(_vecnormalize)?"
-    r"\.[^/]+\.(yml|txt|json|npz|zip|pkl))$"
-)  # the last line: atomic writes' temporary files
-TB_FILES = re.compile(r"^(ppo|sac|td3)_\d+(/events\.out\.tfevents\.[^/]+)?$")
-SCRATCH_FILES = re.compile(r"^evaluations\.npz$")
-
-
-def _not_a_run(run: Path) -> str:
-    """Why ``run`` is not a folder that --overwrite may delete ('' if it is one): a real
-    folder (no symlink) that this script created (``RUN_MARKER``), holding only the files it
-    writes (``RUN_FILES``; TensorBoard logs under tb/, the evaluation scratch folder), and
-    not the working folder, one of its parents or the home folder."""
-    here = Path.cwd().resolve()
-    if run.is_symlink():
-        return "is a symbolic link"
-    target = run.resolve()
-    if target == here or target in here.parents or target == Path.home().resolve():
-        return "is the working folder, one of its parents or the home folder"
-    if not run.is_dir():
-        return "is not a folder"
-    if not (run / RUN_MARKER).is_file():
-        return (
-            f"has no {RUN_MARKER} marker (only folders this script created can be "
-            "replaced; delete an older run folder by hand)"
-        )
-    other = []
-    for p in run.rglob("*"):
-        rel = p.relative_to(run)
-        top, sub = rel.parts[0], "/".join(rel.parts[1:])
-        ok = (
-            not p.is_symlink()
-            and RUN_FILES.match(top) is not None
-            and (
-                not sub
-                or (top == "tb" and TB_FILES.match(sub) is not None)
-                or (top == ".eval_scratch" and SCRATCH_FILES.match(sub) is not None)
-            )
-        )
-        if not ok:
-            other.append(str(rel))
-    if other:
-        return f"holds files a run does not write ({', '.join(sorted(other)[:5])})"
-    return ""
 
 
 def train(args, *, command: str | None = None, on_eval=None) -> Path:

@@ -83,7 +83,7 @@ def test_baselines_design_for_the_nominal_values():
 
 
 def test_the_batched_envs_refuse_a_randomised_scene_and_training_takes_single_envs():
-    from agents.train import choose_vec_env
+    from agents.vec_choice import choose_vec_env
 
     with pytest.raises(ValueError, match="randomize.*single envs"):
         gym.make_vec("RollingDrive-v0", num_envs=2, scene=FAMILY)

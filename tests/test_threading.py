@@ -343,7 +343,7 @@ def test_make_vec_env_kinds_give_the_same_transitions():
     [({"batched": 5e4, "dummy": 2e4}, "batched"), ({"batched": 1e4, "dummy": 2e4}, "dummy")],
 )
 def test_train_takes_the_faster_vector_env(rates, want):
-    from agents.train import choose_vec_env
+    from agents.vec_choice import choose_vec_env
 
     seen = []
 
@@ -362,7 +362,7 @@ def test_train_takes_the_faster_vector_env(rates, want):
 
 @pytest.mark.parametrize("flag", ["batched", "dummy"])
 def test_train_vec_env_flag_overrides_the_measurement(flag):
-    from agents.train import choose_vec_env
+    from agents.vec_choice import choose_vec_env
 
     def measure(*a):
         raise AssertionError("measured despite --vec-env")
@@ -374,7 +374,7 @@ def test_train_vec_env_flag_overrides_the_measurement(flag):
 
 
 def test_train_measurement_rates_both_kinds():
-    from agents.train import measure_vec_envs
+    from agents.vec_choice import measure_vec_envs
 
     rates = measure_vec_envs("default", 2, {}, None, seconds=0.1, rounds=1)
     assert set(rates) == {"batched", "dummy"} and all(v > 0 for v in rates.values()), rates

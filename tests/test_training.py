@@ -161,7 +161,7 @@ def test_train_refuses_a_used_run_folder(tmp_path, capsys):
     folder's parents (it once deleted whatever --run-dir named)."""
     import shutil
 
-    from agents.train import RUN_MARKER
+    from agents.run_folder import RUN_MARKER
     from agents.train import main as train_main
 
     run = tmp_path / "run"
@@ -718,8 +718,8 @@ def test_overwrite_keeps_the_earlier_run_when_the_new_one_fails(tmp_path, monkey
 
     import stable_baselines3 as sb3
 
+    from agents.run_folder import staging_folder
     from agents.train import main as train_main
-    from agents.train import staging_folder
 
     run = tmp_path / "run"
     assert train_main(_overwrite_argv(run)) == 0
