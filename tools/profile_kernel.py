@@ -33,13 +33,7 @@ def _kernel_dispatchers():
     from rolling_env import _envkernel as EK
     from rolling_env import _kernel as K
 
-    mods = (EK, *K.MODULES)
-    return [
-        v
-        for m in mods
-        for v in vars(m).values()
-        if hasattr(v, "overloads") and v.py_func.__module__ == m.__name__
-    ]
+    return [v for m in (EK, K) for v in vars(m).values() if hasattr(v, "overloads")]
 
 
 def _perf_map_lines(tmp: str) -> list[str]:
