@@ -233,8 +233,11 @@ def test_interrupted_training_leaves_loadable_checkpoint(tmp_path, sig):
     while not (run / "evaluations.npz").exists() and time.time() < deadline:
         time.sleep(0.5)
     proc.send_signal(sig)
-    proc.wait(timeout=120)
-    assert proc.returncode == 128 + sig, "an interrupted run must exit 128 + signal, not 0"
+    _, err = proc.communicate(timeout=120)  # drains the pipes; the child's stderr for the message
+    assert proc.returncode == 128 + sig, (
+        f"an interrupted run must exit 128 + signal, got {proc.returncode}; its stderr ends: "
+        f"{err.decode(errors='replace')[-3000:]}"
+    )
     meta = json.loads((run / "meta.json").read_text())
     assert meta["interrupted"] and (run / "checkpoint.zip").exists()
     env = rolling_env.make("default")
