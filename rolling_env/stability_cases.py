@@ -25,8 +25,21 @@ from .stability_checks import (
     _step_check,
 )
 
-
 # ----------------------------------------------------------------------------- free runner
+
+
+def _geo_drive(mu, m, resolution, wave) -> Drive:
+    """A drive of the cases' geometry (``GEO``) over the square wave's stroke."""
+    return Drive(
+        DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=m),
+        a_ref=GEO.a1,
+        resolution=resolution,
+        stroke=wave.stroke,
+        a_max=GEO.a1,
+        t_ref=GEO.tau,
+    )
+
+
 def _sim(delta, eps, w, r, mu=math.inf, periods=20, quasi_static=False, note=""):
     """Square wave on a free runner at the default sub-steps, plus the 4x-step check."""
 
@@ -171,14 +184,7 @@ def liftoff(mu=0.3, r=0.3, resolution=64, lift_tick=9):
     eps = EPS_FRICTION if math.isfinite(mu) else EPS_STICK
     wave = SquareWave(BASE["delta"], eps, BASE["w"], GEO.a1, GEO.R, GEO.tau)
     m = ex.natural_frequency_mass(r, wave, GEO.G_star)
-    drv = Drive(
-        DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=mu, m=m),
-        a_ref=GEO.a1,
-        resolution=resolution,
-        stroke=wave.stroke,
-        a_max=GEO.a1,
-        t_ref=GEO.tau,
-    )
+    drv = _geo_drive(mu, m, resolution, wave)
     drv.reset()
     tph = 4
     d, u, v = wave.ticks(3, tph)
@@ -312,14 +318,7 @@ def long_run(ticks=100_000, resolution=16):
     the default sub-steps through one ``Drive.run`` call."""
     wave = SquareWave(BASE["delta"], EPS_FRICTION, BASE["w"], GEO.a1, GEO.R, GEO.tau)
     m = ex.natural_frequency_mass(BASE["r"], wave, GEO.G_star)
-    drv = Drive(
-        DriveParams(GEO.R, GEO.E_star, GEO.G_star, mu=0.3, m=m),
-        a_ref=GEO.a1,
-        resolution=resolution,
-        stroke=wave.stroke,
-        a_max=GEO.a1,
-        t_ref=GEO.tau,
-    )
+    drv = _geo_drive(0.3, m, resolution, wave)
     drv.reset()
     tph = 4
     d, u, v = wave.ticks(max(ticks // (2 * tph), 1), tph)
