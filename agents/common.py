@@ -6,15 +6,15 @@ import os
 import re
 from pathlib import Path
 
-from rolling_env.io import atomic_write  # noqa: F401  (re-exported)
-from rolling_env.paths import HYPERPARAM_DIR as CONF_DIR
-from rolling_env.scenes import (  # noqa: F401  (re-exported: run folders record them)
+from rolling_env.env.scenes import (  # noqa: F401  (re-exported: run folders record them)
     fields_digest,
     read_yaml,
     scene_digest,
     scene_fields,
     scene_key,
 )
+from rolling_env.io import atomic_write  # noqa: F401  (re-exported)
+from rolling_env.paths import HYPERPARAM_DIR as CONF_DIR
 
 EVAL_SEED = 20261122  # held out: training uses seeds < 1e6, evaluation envs seed + 10000
 MACHINE = "2-core x86_64 CPU, no GPU"  # where the committed runs were trained
@@ -104,7 +104,7 @@ def make_vec_env(
     num_threads=None,
 ):
     """The training vector env, wrapped in ``VecMonitor``.  ``kind="batched"``: the natively
-    batched ``rolling_env.sb3_vec.RollingDriveVecEnv`` (one compiled call steps all envs;
+    batched ``rolling_env.env.sb3_vec.RollingDriveVecEnv`` (one compiled call steps all envs;
     ``num_threads`` as there: None picks the serial or threaded kernel step by step from
     measured step times).  ``kind="dummy"``: SB3's ``DummyVecEnv`` of single envs.  Both give
     the same transitions; which steps faster depends on the host (``rolling-drive bench``,
@@ -116,7 +116,7 @@ def make_vec_env(
     kw = dict(env_kwargs or {})
     kw.pop("scene", None)
     if kind == "batched":
-        from rolling_env.sb3_vec import RollingDriveVecEnv
+        from rolling_env.env.sb3_vec import RollingDriveVecEnv
 
         venv = RollingDriveVecEnv(n_envs, scene=scene, num_threads=num_threads, **kw)
     elif kind == "dummy":
@@ -170,7 +170,7 @@ def completed_fields(fields: dict) -> dict:
     ``grid_levels`` 0), and ``n_sub`` the recorded ``sub_steps`` where that is a number."""
     import dataclasses
 
-    from rolling_env.scenes import Scene
+    from rolling_env.env.scenes import Scene
 
     out = dict(fields)
     for f in dataclasses.fields(Scene):
@@ -222,8 +222,8 @@ def buildable_scene(scene):
     fine resolution over a long stroke needs more spring cells than the model allows): a
     ValueError naming the scene keys where it does not."""
 
-    from rolling_env.env import build_drive
-    from rolling_env.scenes import load_scene
+    from rolling_env.env.drive_env import build_drive
+    from rolling_env.env.scenes import load_scene
 
     sc = load_scene(scene)
     name = str(scene) if isinstance(scene, (str, os.PathLike)) else sc.name

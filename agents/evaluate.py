@@ -33,9 +33,9 @@ from pathlib import Path
 import numpy as np
 
 import rolling_env
-from rolling_env.cli import positive_int
+from rolling_env.cli.main import positive_int
+from rolling_env.env.rollout import rollout
 from rolling_env.io import staged
-from rolling_env.rollout import rollout
 
 from .baselines import Eq32Design, Eq32Feedback, Eq32OpenLoop
 from .common import (
@@ -66,7 +66,7 @@ EPISODES_MAX = 10**5
 
 def held_out_targets(scene, n: int) -> list[float]:
     """n targets drawn from the scene's range with a fixed seed (the same for every controller)."""
-    sc = rolling_env.scenes.load_scene(scene)
+    sc = rolling_env.env.scenes.load_scene(scene)
     rng = np.random.default_rng(EVAL_SEED)
     mags = rng.uniform(sc.target_min, sc.target_max, n)
     signs = rng.choice([-1.0, 1.0], n) if sc.target_both_signs else np.ones(n)

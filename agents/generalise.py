@@ -27,10 +27,10 @@ import sys
 from pathlib import Path
 
 import rolling_env
-from rolling_env.cli import positive_int
+from rolling_env.cli.main import positive_int
+from rolling_env.env.rollout import rollout
+from rolling_env.env.scenes import variants
 from rolling_env.io import staged
-from rolling_env.rollout import rollout
-from rolling_env.scenes import variants
 
 from .common import EVAL_SEED, atomic_write, scene_key
 from .evaluate import EPISODES_MAX, controllers_for, episode_metrics, held_out_targets

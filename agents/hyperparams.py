@@ -280,7 +280,7 @@ def check_hyperparams(algo: str, hp: dict) -> dict:  # noqa: C901 (one check per
     Zoo key the script handles (``ZOO_KEYS``) or a keyword of the algorithm's ``__init__``
     (found with ``inspect.signature``), with a value of the type SB3 annotates and in
     ``RANGES``; anything else raises a ValueError naming the key (an integer may be a float
-    with an integer value: ``1e3``, which ``rolling_env.scenes.read_yaml`` reads as a float),
+    with an integer value: ``1e3``, which ``rolling_env.env.scenes.read_yaml`` reads as a float),
     and the values inside ``policy_kwargs`` are checked too (``check_policy_kwargs``).  Returns
     ``{"n_envs", "n_timesteps", "policy", "normalize" (dict or None), "env_kwargs",
     "action_noise" (None or a (type, std) pair), "residual" (None or a (base, scale) pair),

@@ -93,7 +93,7 @@ def load_agent(path, env=None, base_scene=None):
     import stable_baselines3 as sb3
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    from rolling_env.env import OBS_NAMES
+    from rolling_env.env.drive_env import OBS_NAMES
 
     from .hyperparams import parse_kwargs
     from .period import N_ACTION as N_PERIOD_ACTION
@@ -212,7 +212,7 @@ def _period_of(cfg: dict | None, path: Path) -> bool:
 
 def _trained_scene(cfg: dict):
     """The scene a run was trained on, from its config.yml."""
-    from rolling_env.scenes import load_scene
+    from rolling_env.env.scenes import load_scene
 
     extra = {k: v for k, v in dict(cfg.get("env_kwargs") or {}).items() if k != "scene"}
     return load_scene(cfg.get("scene", "default"), **extra)
@@ -274,7 +274,7 @@ def check_run_scene(run: Path, scene, by_key: bool = True) -> str:
     where they reproduce the recorded digest; otherwise any digest difference refuses the
     run.  A run without a config.yml is not checked; one from before the digest was recorded
     is checked by the scene's name, with a warning."""
-    from rolling_env.scenes import Scene
+    from rolling_env.env.scenes import Scene
 
     from .common import (
         NUMERICS_KEYS,

@@ -31,8 +31,8 @@ from __future__ import annotations
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnvWrapper
 
-from rolling_env.actions import from_controls
-from rolling_env.baselines import TIME_FRACTION, Eq32Design, scene_of
+from rolling_env.env.actions import from_controls
+from rolling_env.env.baselines import TIME_FRACTION, Eq32Design, scene_of
 
 N_ACTION = 4
 HOLD = 0.05  # |drive| below this holds the runner for the period

@@ -374,7 +374,7 @@ def plot_scene(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    tol = rolling_env.scenes.load_scene(scene).tolerance
+    tol = rolling_env.env.scenes.load_scene(scene).tolerance
     fig, ax = plt.subplots(1, 3, figsize=(16, 4.2))
     colors = {name: f"C{i % 10}" for i, name in enumerate(trajectories)}  # one per controller,
     # the same in every panel

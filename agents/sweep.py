@@ -494,7 +494,7 @@ def write_best(sweep: dict, rows: list[dict]) -> dict | None:
     if not done:
         return None
     best = max(done, key=lambda r: r[METRIC])
-    from rolling_env.scenes import read_yaml
+    from rolling_env.env.scenes import read_yaml
 
     out = Path(sweep["output"])
     table = (read_yaml(out, "hyper-parameter file") or {}) if out.exists() else {}

@@ -318,7 +318,7 @@ def _search(raw: dict, out: dict) -> None:
     if Path(out["output"]).suffix.lower() not in (".yml", ".yaml"):
         raise SweepError(f"key 'output' must name a .yml file, got {raw['output']!r}")
     if Path(out["output"]).exists():  # its other entries are kept: it must be readable
-        from rolling_env.scenes import read_yaml
+        from rolling_env.env.scenes import read_yaml
 
         try:
             table = read_yaml(out["output"], "hyper-parameter file")
@@ -336,7 +336,7 @@ def load_sweep(path) -> dict:
     every algorithm known, every hyper-parameter entry (and every end of the search space)
     accepted as agents.train would accept it, the grid not empty.  A SweepError naming the
     key otherwise.  Paths come back absolute."""
-    from rolling_env.scenes import read_yaml
+    from rolling_env.env.scenes import read_yaml
 
     try:
         raw = read_yaml(path, "sweep file")

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import yaml
 
-from rolling_env.cli import positive_int
+from rolling_env.cli.main import positive_int
 
 from .common import (
     ALGOS,
@@ -302,7 +302,7 @@ GOAL_LOG = "eval_goal.json"  # final errors and slip work of the periodic evalua
 
 def num_threads_arg(text):
     """argparse type of --num-threads: 'auto' (None) or an integer in [1, NUMBA_NUM_THREADS]."""
-    from rolling_env.threads import max_threads
+    from rolling_env.env.threads import max_threads
 
     hi = max_threads()
     if text == "auto":

@@ -54,7 +54,7 @@ def choose_vec_env(
     num_threads)`` (env steps/s per kind).  Returns (kind, record for meta.json)."""
     if flag != "auto":
         return flag, {"kind": flag, "chosen_by": "--vec-env"}
-    from rolling_env.scenes import load_scene
+    from rolling_env.env.scenes import load_scene
 
     kw = {k: v for k, v in dict(env_kwargs or {}).items() if k != "scene"}
     if load_scene(scene, **kw).randomize:  # the batched envs step one physics only

@@ -1,5 +1,5 @@
 import sys
 
-from .cli import main
+from rolling_env.cli.main import main
 
 sys.exit(main())

@@ -10,8 +10,8 @@ import math
 import pytest
 
 import rolling_env
-from rolling_env import accuracy as A
-from rolling_env.cli import main
+from rolling_env.cli.main import main
+from rolling_env.studies import accuracy as A
 
 QUICK = {"episode_steps": 32}
 EPISODE_KEYS = {
@@ -183,9 +183,9 @@ def test_bad_flags_exit_2_in_one_line_naming_the_flag(argv, name, tmp_path, caps
 def test_all_writes_one_report_of_every_scene(tmp_path, capsys, monkeypatch):
     """``--all`` runs every shipped scene (here the list is cut to one: the run's cost is the
     other tests') and writes one markdown report; --json is {"scenes": [...], "seconds"}."""
-    import rolling_env.scenes
+    import rolling_env.env.scenes
 
-    monkeypatch.setattr(rolling_env.scenes, "list_scenes", lambda: ["default"])
+    monkeypatch.setattr(rolling_env.env.scenes, "list_scenes", lambda: ["default"])
     out = tmp_path / "sub" / "env_accuracy.md"
     assert (
         main(
@@ -248,7 +248,7 @@ def test_variants_run_each_held_out_variant_with_its_physics(capsys):
     """``--variants`` runs, instead of the scene, each of its held-out variants (one physics
     key scaled), labelled so; the short episodes' override and the variant's key both reach
     the env: the two loads end the same open-loop actions at different runner positions."""
-    from rolling_env.scenes import variants
+    from rolling_env.env.scenes import variants
 
     argv = ["accuracy", "--scene", "loaded", "--variants", "--refine", "1", "--refine-grid"]
     argv += ["1", "--episode-steps", "8", "--episodes-random", "0", "--json"]

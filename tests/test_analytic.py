@@ -1,4 +1,4 @@
-"""The analytic reference module (rolling_env.analytic) against known values and itself.
+"""The analytic reference module (rolling_env.physics.analytic) against known values and itself.
 
 Tolerances: 5e-6 absolute for the paper's printed six-digit samples of Eq. 32, 1e-12..1e-10
 for self-consistency (round trips, identities, which only rounding limits), 1e-5 relative
@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from rolling_env import analytic as an
+from rolling_env.physics import analytic as an
 
 # ----------------------------------------------------------------------------- materials
 STEEL = dict(E1=210e9, nu1=0.3, E2=210e9, nu2=0.3)

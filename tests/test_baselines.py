@@ -9,7 +9,7 @@ import pytest
 import rolling_env
 from agents.baselines import Eq32Design, Eq32Feedback, Eq32OpenLoop
 from agents.evaluate import held_out_targets
-from rolling_env.rollout import rollout
+from rolling_env.env.rollout import rollout
 
 
 def _final_errors(scene, cls, n):
@@ -48,7 +48,7 @@ def test_feedback_stops_at_the_target_in_default_scene():
 def test_baseline_on_a_vecenv_batch_matches_single_env():
     """predict on a VecEnv batch (obs (n, 13), episode_start per env) drives each env as the
     single-env rollout does."""
-    from rolling_env.sb3_vec import RollingDriveVecEnv
+    from rolling_env.env.sb3_vec import RollingDriveVecEnv
 
     target = 2e-7
     venv = RollingDriveVecEnv(2, scene="default")

@@ -1,5 +1,5 @@
 """The env kernels' numba cache is valid only for the physics they embed
-(rolling_env._cachestamp)."""
+(rolling_env.physics._cachestamp)."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import textwrap
 import time
 from types import SimpleNamespace
 
-from rolling_env import _compiler
-from rolling_env import _envkernel as EK
-from rolling_env import _kernel as K
-from rolling_env._cachestamp import bind_sources, drop_if_stale, sources_digest
+from rolling_env.env import _envkernel as EK
+from rolling_env.physics import _compiler
+from rolling_env.physics import _kernel as K
+from rolling_env.physics._cachestamp import bind_sources, drop_if_stale, sources_digest
 
 
 def test_env_kernels_are_bound_to_the_current_physics():
@@ -37,7 +37,7 @@ _ENV = textwrap.dedent("""
     import os, sys, time
     from numba import njit
     import kern
-    from rolling_env._cachestamp import bind_sources, sources_digest
+    from rolling_env.physics._cachestamp import bind_sources, sources_digest
 
     @njit(cache=True)
     def step(x):

@@ -9,8 +9,8 @@ import sys
 
 import pytest
 
-from rolling_env import analytic
-from rolling_env.cli import main
+from rolling_env.cli.main import main
+from rolling_env.physics import analytic
 
 
 def _strict(token):
@@ -222,7 +222,7 @@ def test_rollout_files_are_named_by_the_scene_key_not_the_yaml_name(tmp_path, ca
     rollout must not land on (and overwrite) the shipped scene's files."""
     import yaml
 
-    from rolling_env.scenes import SCENE_DIR
+    from rolling_env.env.scenes import SCENE_DIR
 
     shipped = yaml.safe_load((SCENE_DIR / "default.yaml").read_text())
     custom = dict(shipped, mu=0.01)  # name stays "default"
@@ -446,12 +446,12 @@ with interrupt_ends_process():
 @pytest.mark.parametrize(
     "argv,compute",
     [
-        (["figures"], "rolling_env.figures.make_figures"),
-        (["converge", "--quick"], "rolling_env.converge.study"),
-        (["stability", "--quick"], "rolling_env.stability.run"),
-        (["stability"], "rolling_env.stability.run"),
-        (["bench", "--quick"], "rolling_env.bench.run"),
-        (["rollout", "--controller", "zero"], "rolling_env.rollout.rollout"),
+        (["figures"], "rolling_env.studies.figures.make_figures"),
+        (["converge", "--quick"], "rolling_env.studies.converge.study"),
+        (["stability", "--quick"], "rolling_env.studies.stability.run"),
+        (["stability"], "rolling_env.studies.stability.run"),
+        (["bench", "--quick"], "rolling_env.studies.bench.run"),
+        (["rollout", "--controller", "zero"], "rolling_env.env.rollout.rollout"),
     ],
 )
 def test_unwritable_out_fails_before_any_work(tmp_path, capsys, monkeypatch, argv, compute):
@@ -485,8 +485,8 @@ def test_unwritable_out_fails_before_any_work(tmp_path, capsys, monkeypatch, arg
 @pytest.mark.parametrize(
     "command,module,default",
     [
-        ("stability", "rolling_env.stability", "results/stability.md"),
-        ("bench", "rolling_env.bench", "results/benchmarks.md"),
+        ("stability", "rolling_env.studies.stability", "results/stability.md"),
+        ("bench", "rolling_env.studies.bench", "results/benchmarks.md"),
     ],
 )
 def test_quick_report_is_written_only_where_out_is_given(
@@ -528,7 +528,7 @@ def test_figures_are_written_all_or_none(tmp_path, monkeypatch):
     and 8 beside an old Fig. 9; now no file of the set is written."""
     import matplotlib.figure
 
-    from rolling_env import figures
+    from rolling_env.studies import figures
 
     calls = []
     real = matplotlib.figure.Figure.savefig

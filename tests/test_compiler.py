@@ -1,4 +1,4 @@
-"""The kernels' compiler pipeline (``rolling_env._compiler``): LLVM's predicated loop tails
+"""The kernels' compiler pipeline (``rolling_env.physics._compiler``): LLVM's predicated loop tails
 for our kernels only, LLVM's defaults for everything compiled before and after."""
 
 import re
@@ -8,7 +8,7 @@ import pytest
 from numba import njit
 from numba.core.errors import TypingError
 
-from rolling_env import _compiler
+from rolling_env.physics import _compiler
 
 SRC = """
 def loop_sum(x, n):
@@ -87,8 +87,8 @@ def test_options_restored_when_our_compile_fails():
 def test_every_kernel_compiles_under_the_pipeline():
     """A kernel decorated without ``pipeline_class`` (e.g. a new one not given ``K.JIT``)
     would silently lose the loop options; ``_compiler`` on the dispatcher is numba's."""
-    from rolling_env import _envkernel as EK
-    from rolling_env import _kernel as K
+    from rolling_env.env import _envkernel as EK
+    from rolling_env.physics import _kernel as K
 
     kernels = {
         f"{m.__name__}.{n}": v for m in (K, EK) for n, v in vars(m).items() if hasattr(v, "py_func")
@@ -99,4 +99,4 @@ def test_every_kernel_compiles_under_the_pipeline():
         for n, d in kernels.items()
         if getattr(getattr(d, "_compiler", None), "pipeline_class", None) is not _compiler.Compiler
     )
-    assert not other, f"kernels compiled outside rolling_env._compiler.Compiler: {other}"
+    assert not other, f"kernels compiled outside rolling_env.physics._compiler.Compiler: {other}"

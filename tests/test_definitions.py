@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 
 import rolling_env  # noqa: F401  (registers RollingDrive-v0)
-from rolling_env import analytic
-from rolling_env import experiments as ex
-from rolling_env.excitation import SquareWave
-from rolling_env.model import Drive, DriveParams
-from rolling_env.scenes import SCENE_DIR
+from rolling_env.env.scenes import SCENE_DIR
+from rolling_env.physics import analytic
+from rolling_env.physics import experiments as ex
+from rolling_env.physics.excitation import SquareWave
+from rolling_env.physics.model import Drive, DriveParams
 
 GEO = ex.Geometry()
 A1 = GEO.a1

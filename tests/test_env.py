@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 import rolling_env
-from rolling_env.scenes import SCENE_DIR, load_scene
+from rolling_env.env.scenes import SCENE_DIR, load_scene
 
 SCENES = rolling_env.list_scenes()
 
@@ -87,7 +87,7 @@ def test_copied_env_resets_like_a_fresh_one(copier):
     the drive it resets are the same arrays."""
     import copy
 
-    from rolling_env.env import RollingDriveEnv
+    from rolling_env.env.drive_env import RollingDriveEnv
 
     env = RollingDriveEnv("default")
     env.reset(seed=1)
@@ -278,7 +278,7 @@ def test_scene_range_corners_build_and_stay_finite():
     """Scenes drawn at the ends of the allowed ranges (a few keys at a time): each either is
     rejected with a ValueError at construction or runs with finite observations, rewards and
     info values (in-range values such as period = 1e-200 s once crashed deep inside)."""
-    from rolling_env.scenes import _SPEC
+    from rolling_env.env.scenes import _SPEC
 
     keys = sorted(k for k, v in _SPEC.items() if v[0] is float)
     rng = np.random.default_rng(11)
@@ -411,7 +411,7 @@ def test_scene_file_errors_name_the_file(tmp_path):
     dup.write_text(text + "mu: 0.5\n")
     with pytest.raises(ValueError, match="duplicate key 'mu'"):
         load_scene(dup)
-    from rolling_env.scenes import _UniqueKeyLoader
+    from rolling_env.env.scenes import _UniqueKeyLoader
 
     doc = "a: {<<: {p: 1, q: 2}, p: 3}\nb: {<<: [{p: 1}, {p: 2, q: 1}], r: 1}"
     assert yaml.load(doc, Loader=_UniqueKeyLoader) == yaml.safe_load(doc), (
@@ -462,8 +462,9 @@ def test_registration_without_import():
 
 
 def test_kernel_action_mapping_matches_documented_mapping():
-    """The compiled env tick maps actions exactly as rolling_env.actions.to_controls documents."""
-    from rolling_env.actions import from_controls, to_controls
+    """The compiled env tick maps actions exactly as rolling_env.env.actions.to_controls
+    documents."""
+    from rolling_env.env.actions import from_controls, to_controls
 
     env = gym.make("RollingDrive-v0").unwrapped
     env.reset(seed=0)
@@ -608,7 +609,7 @@ def test_seeded_targets_are_those_of_rng_choice():
     """Reproducibility: the targets a seed gives (and the generator state after them) are
     those of the first implementation, which drew the sign with rng.choice((-1.0, 1.0));
     sample_target draws the same integer without choice's conversion of the tuple."""
-    from rolling_env.env import sample_target
+    from rolling_env.env.drive_env import sample_target
 
     scene = load_scene("default")
     assert scene.target_both_signs
@@ -637,7 +638,7 @@ def test_overflow_of_a_light_loaded_runner_names_the_scene_keys():
     """A legal but absurd scene (a 1e-295 kg runner under 1e6 N, free while the contact
     lifts off) overflows on its first step: the error says which keys make it do so, in the
     single and the batched env."""
-    from rolling_env.vector import BatchCore
+    from rolling_env.env.vector import BatchCore
 
     kw = dict(runner_mass=1e-295, F_ext=1e6, period=1e3, ticks_per_period=2)
     env = gym.make("RollingDrive-v0", **kw)
@@ -655,7 +656,7 @@ def test_scene_inputs_beyond_the_float_range_and_suffix_case(tmp_path):
     """An integer beyond the float range (10**400) raised a bare OverflowError naming no key;
     a scene file whose suffix is upper case (.YAML) was taken for an unknown scene name; a
     0-d array override was refused while numpy scalars were taken."""
-    from rolling_env.scenes import SCENE_DIR
+    from rolling_env.env.scenes import SCENE_DIR
 
     for key in ("episode_steps", "R"):
         with pytest.raises(ValueError, match=f"^scene key '{key}' must be"):

@@ -15,7 +15,7 @@ import rolling_env
 from agents.baselines import Eq32OpenLoop
 from agents.loading import load_agent
 from agents.verdicts import goal_verdicts
-from rolling_env.rollout import rollout
+from rolling_env.env.rollout import rollout
 
 
 def _eval_argv(*scenes, out, runs=None, episodes=1, extra=()):
@@ -121,7 +121,7 @@ def test_seed_summary_sums_up_runs_that_differ_only_in_their_seed():
 def test_rollout_takes_the_open_loop_baseline_by_its_table_name():
     """``eq32-open-loop`` (the name in agents.evaluate's tables) is the same controller as
     ``eq32``: the same class and an identical 40-step rollout."""
-    from rolling_env.rollout import make_controller
+    from rolling_env.env.rollout import make_controller
 
     data = {}
     for name in ("eq32", "eq32-open-loop"):
@@ -152,7 +152,7 @@ def test_evaluate_rejects_a_scene_the_baselines_cannot_drive(tmp_path, capsys):
     from agents.evaluate import main as evaluate_main
 
     slow = tmp_path / "slow.yaml"
-    data = yaml.safe_load((rolling_env.scenes.SCENE_DIR / "default.yaml").read_text())
+    data = yaml.safe_load((rolling_env.env.scenes.SCENE_DIR / "default.yaml").read_text())
     slow.write_text(yaml.safe_dump({**data, "omega_R_max": 0.1}))
     with pytest.raises(SystemExit) as e:
         evaluate_main(_eval_argv("heavy_inf_friction", slow, runs=tmp_path, out=tmp_path / "out"))
@@ -168,7 +168,7 @@ def trained_run(tmp_path_factory):
     base = tmp_path_factory.mktemp("evalruns")
     scene = base / "scenes" / "myscene.yaml"
     scene.parent.mkdir()
-    scene.write_text((rolling_env.scenes.SCENE_DIR / "heavy_inf_friction.yaml").read_text())
+    scene.write_text((rolling_env.env.scenes.SCENE_DIR / "heavy_inf_friction.yaml").read_text())
     runs = base / "runs"
     assert (
         train_main(
@@ -324,7 +324,7 @@ def test_mismatched_model_and_statistics_are_refused(trained_run, tmp_path, caps
 
 
 def _scene_file(path, base="default", **changes):
-    data = yaml.safe_load((rolling_env.scenes.SCENE_DIR / f"{base}.yaml").read_text())
+    data = yaml.safe_load((rolling_env.env.scenes.SCENE_DIR / f"{base}.yaml").read_text())
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(yaml.safe_dump({**data, **changes}))
     return path
@@ -347,7 +347,7 @@ def test_custom_scene_file_named_like_a_shipped_one_is_not_taken_for_it(
     custom = _scene_file(tmp_path / "mine" / "default.yaml", mu=0.01, runner_mass=1e-4)
     key = scene_key(str(custom))
     assert key == f"default-{scene_digest(custom)[:8]}", key
-    assert scene_key(str(rolling_env.scenes.SCENE_DIR / "default.yaml")) == "default", (
+    assert scene_key(str(rolling_env.env.scenes.SCENE_DIR / "default.yaml")) == "default", (
         "the shipped file itself keeps its name"
     )
     monkeypatch.chdir(tmp_path)
@@ -440,7 +440,7 @@ def test_numerics_of_a_recorded_scene_are_completed_and_described():
     from agents.common import completed_fields, numerics_note, scene_fields
 
     now = scene_fields("heavy_inf_friction")
-    n = rolling_env.scenes.load_scene("heavy_inf_friction").n_sub
+    n = rolling_env.env.scenes.load_scene("heavy_inf_friction").n_sub
     assert now["sub_steps"] == "auto" and now["n_sub"] == n and now["accuracy"] == 0.01, now
     assert now["resolution"] == 64, "the notes below assume 64 cells per radius"
     assert now["grid_levels"] == 4, "the notes below assume 4 grid levels"
@@ -470,7 +470,7 @@ def test_a_run_trained_on_other_numerics_is_evaluated_and_marked(trained_run, tm
     import shutil
 
     from agents.evaluate import main as evaluate_main
-    from rolling_env.cli import main as cli_main
+    from rolling_env.cli.main import main as cli_main
 
     scene, runs = trained_run
     shutil.copytree(runs / "myscene" / "ppo_seed0", tmp_path / "runs" / "myscene" / "ppo_seed0")
@@ -483,7 +483,7 @@ def test_a_run_trained_on_other_numerics_is_evaluated_and_marked(trained_run, tm
             accuracy=None,
             n_sub=None,
         )
-    sc = rolling_env.scenes.load_scene(str(scene))
+    sc = rolling_env.env.scenes.load_scene(str(scene))
     assert sc.sub_steps == "auto" and sc.n_sub != 4 and sc.resolution == 64
     out = tmp_path / "out"
     assert evaluate_main(_eval_argv(scene, runs=tmp_path / "runs", out=out)) == 0
@@ -608,7 +608,7 @@ def test_rollout_cli_refuses_a_model_of_another_scene_and_names_files_by_run(
     model.zip no longer write the same <scene>_model_seed0.csv."""
     import shutil
 
-    from rolling_env.cli import main as cli_main
+    from rolling_env.cli.main import main as cli_main
 
     scene, runs = trained_run
     model = runs / "myscene" / "ppo_seed0" / "model.zip"
@@ -662,8 +662,8 @@ def test_a_loose_model_zip_is_loaded_with_its_own_algorithm(algo, tmp_path, caps
     import stable_baselines3 as sb3
 
     from agents.loading import model_algo
-    from rolling_env.cli import main as cli_main
-    from rolling_env.sb3_vec import RollingDriveVecEnv
+    from rolling_env.cli.main import main as cli_main
+    from rolling_env.env.sb3_vec import RollingDriveVecEnv
 
     cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[algo]
     path = tmp_path / "loose" / f"{algo}_model.zip"
@@ -700,7 +700,7 @@ def test_a_zip_that_is_no_sb3_model_is_one_line(tmp_path, capsys):
     import zipfile
 
     from agents.loading import model_algo
-    from rolling_env.cli import main as cli_main
+    from rolling_env.cli.main import main as cli_main
 
     junk = tmp_path / "junk.zip"
     junk.write_text("not a zip")
@@ -812,7 +812,7 @@ def test_evaluate_refuses_duplicate_scenes(tmp_path, capsys):
     naming --scenes, also where two spellings (name, path of the shipped file) have one key."""
     from agents.evaluate import main as evaluate_main
 
-    shipped = str(rolling_env.scenes.SCENE_DIR / "default.yaml")
+    shipped = str(rolling_env.env.scenes.SCENE_DIR / "default.yaml")
     for scenes in (["default", "default"], ["default", "heavy_inf_friction", shipped]):
         with pytest.raises(SystemExit) as e:
             evaluate_main(_eval_argv(*scenes, out=tmp_path / "out", extra=["--baselines-only"]))
@@ -885,7 +885,7 @@ def test_damaged_run_files_are_one_line_naming_the_file(trained_run, tmp_path, c
     import shutil
 
     from agents.evaluate import main as evaluate_main
-    from rolling_env.cli import main as cli_main
+    from rolling_env.cli.main import main as cli_main
 
     scene, runs = trained_run
     run = tmp_path / "runs" / "myscene" / "ppo_seed0"

@@ -24,7 +24,7 @@ from agents.residual import ResidualAgent
     ],
 )
 def test_variants_change_one_physics_key_by_its_factor(scene, keys):
-    nominal = rolling_env.scenes.load_scene(scene)
+    nominal = rolling_env.env.scenes.load_scene(scene)
     got = variants(scene)
     assert [label for label, _ in got] == keys
     for label, overrides in got:
@@ -86,7 +86,7 @@ def residual_run(tmp_path_factory):
 def test_every_controller_keeps_its_nominal_design(residual_run):
     """The baselines and a residual agent's baseline are designed on the nominal scene, not
     on the variant they run on."""
-    nominal = rolling_env.scenes.load_scene("loaded")
+    nominal = rolling_env.env.scenes.load_scene("loaded")
     ctrls = _nominal_controllers("loaded", residual_run)
     assert set(ctrls) == {"eq32-open-loop", "eq32-feedback", "ppo-residual_seed0"}
     agent = ctrls["ppo-residual_seed0"]

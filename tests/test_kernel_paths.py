@@ -14,9 +14,9 @@ import pytest
 from numba import njit
 
 import rolling_env
-from rolling_env import _envkernel as EK
-from rolling_env import _kernel as K
-from rolling_env.vector import BatchCore
+from rolling_env.env import _envkernel as EK
+from rolling_env.env.vector import BatchCore
+from rolling_env.physics import _kernel as K
 
 sys.path.insert(0, str(Path(__file__).parent))  # tests/make_golden.py
 
@@ -380,7 +380,7 @@ def test_ledger_impulse_is_accurate_at_creep_reversals():
     tick: per-tick impulse within 1e-4 of the largest (measured 1.1e-6), end-of-tick T equal
     to 1e-12 (unaffected), and the residual / drive work in [0, 1e-3] at 40 sub-steps
     (measured +7.9e-5: dissipated, not created)."""
-    from rolling_env.model import Drive, DriveParams
+    from rolling_env.physics.model import Drive, DriveParams
 
     R, E, a1, tau = 1e-3, 115e9, 2e-5, 1e-3
     rng = np.random.default_rng(11)
@@ -434,7 +434,7 @@ def test_ledger_impulse_in_steady_partial_slip(mu, bounds):
     this measured 6.9e-4 / 4.3e-5 and 2.6e-3 / 1.9e-4, the trapezoid on T alone
     8.3e-5 / 6.1e-6 and 6.9e-5 / 4.0e-6 (docs/physics.md, "Impulse and work with finite
     friction")."""
-    from rolling_env.model import Drive, DriveParams
+    from rolling_env.physics.model import Drive, DriveParams
 
     R, E, a1, tau = 1e-3, 115e9, 2e-5, 1e-3
     k, u, dt = 6, 5 * a1 / tau, tau / 8
@@ -472,7 +472,7 @@ def test_ledger_impulse_in_steady_full_sliding_is_exact():
     edge cells slide all through and take their limit's exact integral, the inner cells the
     trapezoid with the curvature term (without it this fails; the trapezoid on T alone,
     before the per-cell ledger, was exact here too, T being constant)."""
-    from rolling_env.model import Drive, DriveParams
+    from rolling_env.physics.model import Drive, DriveParams
 
     R, E, a1, tau, mu = 1e-3, 115e9, 2e-5, 1e-3, 0.2
     k, u, dt = 6, 5 * a1 / tau, tau / 8
@@ -851,8 +851,8 @@ def test_env_drive_refuses_drive_run_and_old_pickles_load():
     import pickle
 
     import rolling_env
-    from rolling_env.model import Drive
-    from rolling_env.vector import BatchCore
+    from rolling_env.env.vector import BatchCore
+    from rolling_env.physics.model import Drive
 
     env = rolling_env.make("default")
     drv = env.unwrapped.drive

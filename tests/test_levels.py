@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 import rolling_env
-from rolling_env import _kernel as K
-from rolling_env.model import Drive, DriveParams
-from rolling_env.scenes import load_scene
+from rolling_env.env.scenes import load_scene
+from rolling_env.physics import _kernel as K
+from rolling_env.physics.model import Drive, DriveParams
 
 R = 1e-3
 A_MAX = 1.87e-5

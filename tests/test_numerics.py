@@ -14,9 +14,10 @@ import math
 import numpy as np
 import pytest
 
-from rolling_env import analytic, converge, figures, stability, stability_cases
-from rolling_env import experiments as ex
-from rolling_env.cli import main
+from rolling_env.cli.main import main
+from rolling_env.physics import analytic
+from rolling_env.physics import experiments as ex
+from rolling_env.studies import converge, figures, stability, stability_cases
 
 
 @pytest.fixture(scope="module")
@@ -229,7 +230,7 @@ def test_converge_quick_csv(quick_study):
 def test_converge_quick_env_lines(quick_study):
     """The quick study's env lines (the default scene; ``converge.ENV_QUICK_SCENES``): the
     accuracy module's standard episodes replayed at the shipped sub-steps x 1/4 .. 4.  At the
-    shipped sub-steps the worst error equals ``rolling_env.accuracy``'s (same episodes, same
+    shipped sub-steps the worst error equals ``rolling_env.studies.accuracy``'s (same episodes, same
     reference; relative 1e-9).  The slip work, charged from the onset of sliding within each
     sub-step, is at the grid's floor from 1/4x the sub-steps on: within 1% at every level
     (measured 0.70% at 1/4x, 0.49% at 1x) and changed by less than 0.1% of the reference
@@ -237,7 +238,7 @@ def test_converge_quick_env_lines(quick_study):
     6% off at 1/4x.  The x* error at the shipped grid is the grid's own: 2x and 4x the
     sub-steps change it by less than 10% (measured 0.085 tolerances at all three)."""
     import rolling_env
-    from rolling_env import accuracy
+    from rolling_env.studies import accuracy
 
     assert converge.ENV_QUICK_SCENES == ("default",)
     rows = list(csv.DictReader((quick_study / "work_precision_quick.csv").open()))

@@ -88,6 +88,37 @@ def test_the_library_imports_no_agent_code_and_no_test_file():
         assert "spec_from_file_location" not in text, f"{name} loads a module by path"
 
 
+LAYERS = ("physics", "env", "studies", "cli")  # each may import those before it
+TOP_UTILITIES = ("rolling_env.io", "rolling_env.validation", "rolling_env.paths")
+
+
+def _layer(name: str) -> int | None:
+    parts = name.split(".")
+    return LAYERS.index(parts[1]) if len(parts) > 1 and parts[1] in LAYERS else None
+
+
+def test_each_layer_of_the_library_imports_only_the_layers_below_it():
+    """physics < env < studies < cli: the physics knows no env, the env no study, no study
+    the command line; the top-level utilities serve every layer, and ``rolling_env`` itself
+    (``make``, which builds an env) only the studies and the CLI."""
+    mods = _modules("rolling_env")
+    for name, path in mods.items():
+        own = _layer(name)
+        if own is None:
+            continue
+        for dep in _imports(name, path, mods):
+            if not dep.startswith("rolling_env") or dep in TOP_UTILITIES:
+                continue
+            if dep == "rolling_env":
+                assert own >= LAYERS.index("studies"), f"{name} imports rolling_env (make)"
+                continue
+            layer = _layer(dep)
+            assert layer is not None and layer <= own, (
+                f"{name} ({LAYERS[own]}) imports {dep}: allowed are "
+                f"{', '.join(LAYERS[: own + 1])} and {', '.join(TOP_UTILITIES)}"
+            )
+
+
 @pytest.mark.parametrize("package", ["rolling_env", "agents"])
 def test_no_import_cycle_among_a_packages_modules(package):
     mods = _modules(package)
@@ -150,7 +181,7 @@ def test_a_built_wheel_runs_its_scenes_from_any_folder(tmp_path):
         [
             "import json, sys, numpy as np, gymnasium as gym",
             "import rolling_env, agents",
-            "from rolling_env.scenes import list_scenes",
+            "from rolling_env.env.scenes import list_scenes",
             "from rolling_env.paths import CONFIG_DIR",
             "from agents.common import load_hyperparams",
             "from importlib.metadata import entry_points",
@@ -191,7 +222,7 @@ def test_a_model_without_an_installed_loader_is_one_line(monkeypatch, tmp_path):
     import importlib.metadata
 
     import rolling_env
-    from rolling_env import rollout
+    from rolling_env.env import rollout
 
     monkeypatch.setattr(importlib.metadata, "entry_points", lambda group=None: [])
     model = tmp_path / "model.zip"

@@ -9,9 +9,9 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 import rolling_env
 from agents.hyperparams import check_hyperparams
 from agents.period import HOLD, PeriodAgent, PeriodExcitation, PeriodVecEnv
-from rolling_env.baselines import Eq32Design
-from rolling_env.rollout import rollout
-from rolling_env.scenes import load_scene
+from rolling_env.env.baselines import Eq32Design
+from rolling_env.env.rollout import rollout
+from rolling_env.env.scenes import load_scene
 
 
 @pytest.mark.parametrize("scene", ["default", "light_stiff", "heavy_inf_friction"])

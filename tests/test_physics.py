@@ -13,11 +13,11 @@ import re
 import numpy as np
 import pytest
 
-from rolling_env import _kernel as K
-from rolling_env import analytic
-from rolling_env import experiments as ex
-from rolling_env.excitation import SquareWave
-from rolling_env.model import Drive, DriveParams
+from rolling_env.physics import _kernel as K
+from rolling_env.physics import analytic
+from rolling_env.physics import experiments as ex
+from rolling_env.physics.excitation import SquareWave
+from rolling_env.physics.model import Drive, DriveParams
 
 GEO = ex.Geometry()
 
@@ -766,7 +766,7 @@ def test_scene_massless_runner_load_only_where_the_contact_holds_it():
     """A scene may load a massless runner only with |F_ext| < mu N_min: then every action keeps
     a force equilibrium (the env kernel cannot report the sliding case); beyond, or with
     N_min = 0 (lift-off), the scene is refused naming F_ext and mu N_min."""
-    from rolling_env.scenes import load_scene
+    from rolling_env.env.scenes import load_scene
 
     sc = load_scene("default", runner_mass=0.0, N_min=0.2, F_ext=0.9 * 0.2 * 0.2, mu=0.2)
     assert sc.runner_mass == 0.0 and sc.F_ext == pytest.approx(0.036, rel=1e-12)
@@ -938,7 +938,7 @@ def test_free_runner_rings_at_the_contact_frequency_without_damping():
     crossings of v* is within 0.5% of it and the ringing's amplitude, sqrt(v*^2 + T^2 / (k
     m)), within 1% of the start: the step neither damps nor detunes it (backward Euler's
     numerical damping ratio at 0.5 rad is 0.25)."""
-    from rolling_env.scenes import load_scene
+    from rolling_env.env.scenes import load_scene
 
     sc = load_scene("light_stiff")
     p = DriveParams(sc.R, sc.E_star, sc.G_star, m=sc.runner_mass)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import rolling_env
-from rolling_env.scenes import SCENE_DIR, load_scene
+from rolling_env.env.scenes import SCENE_DIR, load_scene
 
 FAMILY = str(SCENE_DIR / "families" / "default-randomized.yaml")
 

@@ -1,4 +1,5 @@
-"""The numba finite-volume kernel against the slow plain-numpy spring row (rolling_env.naive).
+"""The numba finite-volume kernel against the slow plain-numpy spring row
+(rolling_env.physics.naive).
 
 Both discretise the same continuum (physics.md) differently: the naive row converges
 erratically (about 1-3% at 100-200 springs per radius), ours smoothly.  On random
@@ -13,9 +14,9 @@ import math
 import numpy as np
 import pytest
 
-from rolling_env import experiments as ex
-from rolling_env import naive
-from rolling_env.model import Drive, DriveParams
+from rolling_env.physics import experiments as ex
+from rolling_env.physics import naive
+from rolling_env.physics.model import Drive, DriveParams
 
 GEO = ex.Geometry()
 a1 = GEO.a1

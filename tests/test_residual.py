@@ -10,7 +10,7 @@ import rolling_env
 from agents.baselines import Eq32Feedback, Eq32OpenLoop
 from agents.loading import load_agent
 from agents.residual import BASES, ResidualAgent, ResidualVecEnv, augment, check_residual, combine
-from rolling_env.rollout import rollout
+from rolling_env.env.rollout import rollout
 
 
 def _actions(data):
@@ -85,7 +85,7 @@ def test_residual_vec_env_with_zero_actions_runs_the_baseline_across_episode_end
     """The training wrapper: zero residuals drive each env as the baseline does, through the
     same-step autoreset; a finished env's terminal observation carries the baseline's action
     too (16 numbers), and the baseline restarts its plan on the new episode."""
-    from rolling_env.sb3_vec import RollingDriveVecEnv
+    from rolling_env.env.sb3_vec import RollingDriveVecEnv
 
     steps = 600  # one episode end (512 ticks)
     venv = ResidualVecEnv(

@@ -15,16 +15,16 @@ import numpy as np
 import pytest
 
 import rolling_env  # noqa: F401  (registers RollingDrive-v0)
-import rolling_env._envkernel as EK
-from rolling_env.hostload import HostLoad
-from rolling_env.sb3_vec import RollingDriveVecEnv
-from rolling_env.threads import (
+import rolling_env.env._envkernel as EK
+from rolling_env.env.hostload import HostLoad
+from rolling_env.env.sb3_vec import RollingDriveVecEnv
+from rolling_env.env.threads import (
     PARALLEL_MIN_ENVS,
     ThreadPolicy,
     max_threads,
     thread_choices,
 )
-from rolling_env.vector import BatchCore
+from rolling_env.env.vector import BatchCore
 
 THREADS = min(2, max_threads())
 two_threads = pytest.mark.skipif(max_threads() < 2, reason="numba runs one thread here")

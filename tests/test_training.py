@@ -20,7 +20,7 @@ from agents.common import atomic_write, load_hyperparams
 from agents.evaluate import episode_metrics, held_out_targets
 from agents.hyperparams import parse_kwargs
 from agents.loading import agent_file, load_agent
-from rolling_env.rollout import rollout
+from rolling_env.env.rollout import rollout
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -656,7 +656,7 @@ def test_shipped_policy_kwargs_and_valid_ones_pass():
 
 def test_exponent_numbers_in_hyperparameter_yaml(tmp_path):
     """PyYAML (YAML 1.1) reads 3e-4, 9e-1 and 1e3 as strings: they were refused as 'must be a
-    number, got '3e-4''.  The project's YAML loader (``rolling_env.scenes.read_yaml``, also
+    number, got '3e-4''.  The project's YAML loader (``rolling_env.env.scenes.read_yaml``, also
     for scene files and run configs) reads them as floats, as YAML 1.2 does; n_timesteps 1e3
     is the integer 1000, 1.5e0 for an integer is still refused, and lin_2e-1 stays a string
     (a schedule)."""

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 import rolling_env
-import rolling_env._envkernel as EK
-from rolling_env.sb3_vec import RollingDriveVecEnv
-from rolling_env.threads import PARALLEL_MIN_ENVS, ThreadPolicy, max_threads
-from rolling_env.vector import BatchCore
+import rolling_env.env._envkernel as EK
+from rolling_env.env.sb3_vec import RollingDriveVecEnv
+from rolling_env.env.threads import PARALLEL_MIN_ENVS, ThreadPolicy, max_threads
+from rolling_env.env.vector import BatchCore
 
 STEPS = 40  # with max_episode_steps = 15: crosses two episode boundaries
 THREADS = min(2, max_threads())  # the threaded kernel's thread count in these tests
@@ -146,6 +146,7 @@ def test_reset_mask_must_be_one_bool_per_env(mask):
     assert [r.bit_generator.state for r in core.rngs] == state, "a generator advanced"
 
 
+@pytest.mark.skipif(THREADS < 2, reason="numba runs one thread here")
 def test_parallel_kernel_equals_serial():
     a, b = BatchCore(70, num_threads=THREADS), BatchCore(70, num_threads=1)
     assert b._step_fn is EK.env_step_serial and a._step_fn is not EK.env_step_serial
@@ -218,7 +219,7 @@ def test_kernel_errors_raise_in_single_and_batched_env(num_envs):
     the contact off the spring row -> RuntimeError, a non-finite state -> FloatingPointError;
     the batch's message names the env that failed (it named none: the user had to search the
     state for it), and a reset of that env alone lets the batch go on."""
-    from rolling_env import _kernel as K
+    from rolling_env.physics import _kernel as K
 
     core = BatchCore(num_envs, scene="default")
     core.reset()
@@ -531,19 +532,19 @@ def test_sb3_env_method_reset_returns_obs_and_info_like_dummy_vec_env():
 
 def test_make_vec_needs_neither_sb3_nor_torch():
     """``gym.make_vec("RollingDrive-v0")`` steps without importing Stable-Baselines3 or torch
-    (they cost 1.3 s and ~300 MiB); the SB3 adapter imports from rolling_env.sb3_vec."""
+    (they cost 1.3 s and ~300 MiB); the SB3 adapter imports from rolling_env.env.sb3_vec."""
     code = (
         "import sys, numpy as np, gymnasium as gym, rolling_env; "
         "e = gym.make_vec('RollingDrive-v0', num_envs=2); e.reset(seed=0); "
         "e.step(np.zeros((2, 3), dtype=np.float32)); "
         "print(sorted(m for m in ('torch', 'stable_baselines3') if m in sys.modules)); "
-        "from rolling_env.sb3_vec import RollingDriveVecEnv; "
+        "from rolling_env.env.sb3_vec import RollingDriveVecEnv; "
         "print(RollingDriveVecEnv.__module__)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     lines = out.stdout.split("\n")
     assert lines[0] == "[]", f"gym.make_vec imported {lines[0]}"
-    assert lines[1] == "rolling_env.sb3_vec", f"the SB3 adapter is {lines[1]!r}"
+    assert lines[1] == "rolling_env.env.sb3_vec", f"the SB3 adapter is {lines[1]!r}"
 
 
 def test_gymnasium_vector_env_needs_a_reset_before_step_like_sync():

@@ -30,8 +30,8 @@ import numpy as np
 
 
 def _kernel_dispatchers():
-    from rolling_env import _envkernel as EK
-    from rolling_env import _kernel as K
+    from rolling_env.env import _envkernel as EK
+    from rolling_env.physics import _kernel as K
 
     return [v for m in (EK, K) for v in vars(m).values() if hasattr(v, "overloads")]
 
@@ -60,8 +60,8 @@ def _perf_map_lines(tmp: str) -> list[str]:
 
 def workload(scene: str, envs: int, seconds: float) -> None:
     """Run under perf: compile, write the perf map, then step the batch for ``seconds``."""
-    from rolling_env import _envkernel as EK
-    from rolling_env.vector import BatchCore
+    from rolling_env.env import _envkernel as EK
+    from rolling_env.env.vector import BatchCore
 
     core = BatchCore(envs, scene=scene)
     core._step_fn = EK.env_step_serial

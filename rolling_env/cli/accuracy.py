@@ -1,0 +1,163 @@
+"""Subcommand accuracy: the env's error at a scene's shipped settings against a refined
+reference, with its speed (``--all --out results/env_accuracy.md`` for every shipped scene)."""
+
+from __future__ import annotations
+
+from rolling_env.cli.main import emit, file_path, positive_int
+
+REPORT = "results/env_accuracy.md"
+
+
+def register(sub):
+    from rolling_env.studies.accuracy import DEFAULT_GRID, DEFAULT_REFINE
+
+    p = sub.add_parser(
+        "accuracy",
+        help="error of the env at a scene's shipped settings against "
+        "a refined reference, and its steps/s",
+        description="Run the scene's standard episodes at its shipped settings "
+        "(Eq. 32 feedback, Eq. 32 open loop, uniform random actions, and with --agents "
+        "one of each trained agent configuration), replay each "
+        "action sequence open loop at two refined levels (sub-steps x K and 2K, "
+        "grid x G and 2G), extrapolate them (Richardson, assumed second order) "
+        "and print the shipped env's final-position error in tolerances, its "
+        "slip-work error in %, its steps/s and the reference's uncertainty.  "
+        f"`--all --out {REPORT}` regenerates the report of every shipped scene.",
+    )
+    which = p.add_mutually_exclusive_group(required=True)
+    which.add_argument("--scene", help="scene name or YAML path")
+    which.add_argument(
+        "--all", action="store_true", help="every shipped scene (configs/scenes/*.yaml)"
+    )
+    p.add_argument(
+        "--refine",
+        type=positive_int("refine", 1, 100000),
+        default=DEFAULT_REFINE,
+        help=f"K: the reference levels have K and 2K times the shipped sub-steps "
+        f"(default {DEFAULT_REFINE})",
+    )
+    p.add_argument(
+        "--refine-grid",
+        type=positive_int("refine-grid", 1, 1024),
+        default=DEFAULT_GRID,
+        help="G: the reference levels have G and 2G times the "
+        f"shipped cells per contact radius (default {DEFAULT_GRID})",
+    )
+    p.add_argument(
+        "--episodes-random",
+        type=positive_int("episodes-random", 0, 100),
+        default=1,
+        help="episodes of uniform random actions (default 1)",
+    )
+    p.add_argument(
+        "--seed",
+        type=positive_int("seed", 0, 2**31 - 1),
+        default=0,
+        help="reset seed of every episode and seed of the random actions (default 0)",
+    )
+    p.add_argument(
+        "--episode-steps",
+        type=positive_int("episode-steps", 1, 10**6),
+        default=None,
+        help="episode length (default: the scene's own; shorter for a quick check)",
+    )
+    p.add_argument(
+        "--variants",
+        action="store_true",
+        help="instead of each scene, its held-out variants: mu x0.5 and x2 where finite, "
+        "runner mass x0.5 and x2, load x0.5 and x1.5 where there is one",
+    )
+    p.add_argument(
+        "--agents",
+        default=None,
+        metavar="RUNS",
+        help="also an episode of each trained agent configuration: the seed-0 run's "
+        "model.zip of every RUNS/<scene>/<config>_seed0 (e.g. results/agents)",
+    )
+    p.add_argument(
+        "--out",
+        type=file_path("out"),
+        default=None,
+        help="also write a markdown report to this file",
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_run)
+
+
+def _command(args) -> str:
+    """The command line that reproduces the run, for the report's header."""
+    parts = ["rolling-drive accuracy", "--all" if args.all else f"--scene {args.scene}"]
+    from rolling_env.studies.accuracy import DEFAULT_GRID, DEFAULT_REFINE
+
+    for flag, val, default in (
+        ("--refine", args.refine, DEFAULT_REFINE),
+        ("--refine-grid", args.refine_grid, DEFAULT_GRID),
+        ("--episodes-random", args.episodes_random, 1),
+        ("--seed", args.seed, 0),
+        ("--episode-steps", args.episode_steps, None),
+        ("--variants", args.variants, False),
+        ("--agents", args.agents, None),
+    ):
+        if val is True:
+            parts.append(flag)
+        elif val != default:
+            parts.append(f"{flag} {val}")
+    if args.out is not None:
+        parts.append(f"--out {args.out}")
+    return " ".join(parts)
+
+
+def _run(args):
+    from pathlib import Path
+
+    from rolling_env.env.scenes import list_scenes, load_scene
+    from rolling_env.io import check_writable, write_text
+    from rolling_env.studies.accuracy import (
+        agent_models,
+        check_levels,
+        check_scene,
+        report,
+        run,
+        table,
+    )
+
+    scenes = list_scenes() if args.all else [args.scene]
+    if args.agents is not None and not Path(args.agents).is_dir():
+        raise ValueError(f"--agents: no such folder {args.agents!r}")
+    overrides = None if args.episode_steps is None else {"episode_steps": args.episode_steps}
+    # every scene and level is built once before any episode runs: a bad value fails at
+    # once, naming its flag
+    for scene in scenes:
+        try:
+            check_scene(scene, overrides)
+        except ValueError as e:
+            raise ValueError(f"--scene: {e}") from None
+        for flag, factors in (
+            ("refine", [(args.refine, 1), (2 * args.refine, 1)]),
+            ("refine-grid", [(1, args.refine_grid), (1, 2 * args.refine_grid)]),
+        ):
+            try:
+                check_levels(scene, factors, overrides)
+            except ValueError as e:
+                raise ValueError(f"--{flag}: {e}") from None
+    models = {}
+    if args.agents is not None:
+        for scene in scenes:
+            models[scene] = agent_models(args.agents, load_scene(scene).name)
+    out = None if args.out is None else check_writable(args.out)
+    res = run(
+        scenes,
+        models=models,
+        variants=args.variants,
+        refine=args.refine,
+        grid=args.refine_grid,
+        episodes_random=args.episodes_random,
+        seed=args.seed,
+        overrides=overrides,
+    )
+    human = "\n\n".join(table(r) for r in res["scenes"])
+    if out is not None:
+        write_text(out, report(res["scenes"], _command(args), res["seconds"]))
+        human += f"\n\nwrote {out}"
+    emit(res if args.all or args.variants else res["scenes"][0], args.json, human)
+    return 0
