@@ -1,4 +1,4 @@
-"""Record env trajectories as a regression reference for tests/test_kernel_paths.py.
+"""Record env trajectories as a regression reference for tests/physics/test_kernel_paths.py.
 
     python tests/make_golden.py tests/data/golden_env.npz
 

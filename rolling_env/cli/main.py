@@ -145,7 +145,7 @@ _NEGATIVE_NUMBER = re.compile(
 class _Parser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        # a private attribute of argparse (tests/test_cli.py checks that negative values in
+        # a private attribute of argparse (tests/cli/test_cli.py checks that negative values in
         # exponent form reach the commands, and that -inf gets the range message)
         self._negative_number_matcher = _NEGATIVE_NUMBER
 

@@ -28,7 +28,7 @@ either); they read the error from obs[0] * target_max and keep their own tick co
 (reset on ``episode_start``, or on an observation with time_fraction 0, which only a
 reset gives).  The action is built by ``rolling_env.env.actions.from_controls``,
 the inverse of the env's action mapping ``to_controls`` (one module for both; the compiled
-env tick is tested to map actions exactly as ``to_controls``, tests/test_env.py).
+env tick is tested to map actions exactly as ``to_controls``, tests/env/test_env.py).
 """
 
 from __future__ import annotations

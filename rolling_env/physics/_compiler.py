@@ -14,7 +14,7 @@ These are process-wide LLVM command-line options (llvmlite's ``set_option``; num
 per-function switch).  ``Compiler`` sets them only while it compiles one of our kernels and
 restores LLVM's defaults afterwards, inside numba's global compiler lock, so no other numba
 compilation runs in between: a user's own numba functions compiled before or after are not
-affected (tests/test_compiler.py compares their machine code).  Caveats, stated rather than
+affected (tests/physics/test_compiler.py compares their machine code).  Caveats, stated rather than
 hidden: numba helpers that our compile triggers for the first time in a process (e.g. the
 implementation of a slice assignment) are compiled under the options too and numba reuses
 them; the result is equivalent code with masked tails.  An LLVM option the user set to a

@@ -70,7 +70,7 @@ def _jit_options() -> dict:
     loop tails, where they apply) and, where this numba has it, ``_nrt=False`` (see the
     module docstring).  ``_nrt`` is private: should a numba release drop it, the kernels keep
     reference counting (about 5% slower) rather than fail to compile (numba refuses unknown
-    options at the first call); tests/test_kernel_paths.py says so with the numba tested."""
+    options at the first call); tests/physics/test_kernel_paths.py says so with the numba tested."""
     opts = dict(cache=True, error_model="numpy", pipeline_class=Compiler)
     try:
         from numba.core.cpu import CPUTargetOptions
@@ -389,7 +389,7 @@ def _walk_content(U0, xL, xR, c0, a, u, inv_au, dt):
     content grows by s times the integral of the overlap until the trailing edge enters the
     cell, and from there its mean deflection grows by s (one division and no loop).  A
     contact narrower than the cell takes ``_walk``.  Agrees with ``_walk`` to round-off
-    (tests/test_kernel_paths.py)."""
+    (tests/physics/test_kernel_paths.py)."""
     if u == 0.0:
         return U0, _overlap(xL, xR, c0, a) * dt
     au = abs(u)
@@ -1329,7 +1329,7 @@ def _tick(W, st, p, d, u, v, vs_presc, mu, mass, load, n_sub, dt, out, ledger): 
     ``ST_DRIVE``, ``ST_RUNNER``, ``ST_EXT``, ``ST_SNAP``, ``OUT_IMP``); None leaves them out
     (the env needs neither: its observation, reward and info use T, v*, x*, the slip work and
     the stuck fraction, which are the same either way, to round-off:
-    tests/test_kernel_paths.py).
+    tests/physics/test_kernel_paths.py).
 
     Passes over the cells per sub-step: with infinite friction one build pass (A, B) and the
     commit; with finite friction and a free runner the build pass also evaluates the runner

@@ -222,7 +222,7 @@ def impulse_coefficients(delta, w):
     For 1 + sqrt(delta) <= w < 2 not every forth-step spring is released before the step
     reverses and C1 gains k = (2 - w)^3 / 6, so P and Q both gain k.  This branch is taken from
     physics.md, not from the paper; it is checked against the simulation in
-    tests/test_physics.py.  Below w = 1 + sqrt(delta) some springs never release and the
+    tests/physics/test_physics.py.  Below w = 1 + sqrt(delta) some springs never release and the
     formula does not apply: ValueError.
     """
     delta, w = _arr("delta", delta, 0, 1), _w(w)
@@ -263,7 +263,7 @@ def working_point_ratio(delta, eps, w):
     """Working point v*/(omega R) = (1 - eps) P/Q (zero period impulse) for
     w >= 1 + sqrt(delta): equal to Eq. 32 for w >= 2, with the (2 - w)^3/6 correction of
     physics.md below (see ``impulse_coefficients``; checked against simulation in
-    tests/test_physics.py)."""
+    tests/physics/test_physics.py)."""
     eps = _arr("eps", eps)
     P, Q = impulse_coefficients(delta, w)
     w = np.asarray(w, dtype=np.float64)

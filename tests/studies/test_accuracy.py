@@ -223,7 +223,7 @@ def test_agents_add_one_episode_per_configuration(tmp_path, capsys):
     import shutil
     from pathlib import Path
 
-    src = Path(__file__).resolve().parents[1] / "results" / "agents" / "default"
+    src = Path(__file__).resolve().parents[2] / "results" / "agents" / "default"
     runs = tmp_path / "runs" / "default"
     for name in ("ppo_seed0", "ppo_seed1", "sac_seed0"):
         shutil.copytree(src / name, runs / name)

@@ -22,7 +22,7 @@ import yaml
 
 from agents import sweep as S
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 TINY = {"n_timesteps": 4096, "eval_freq": 4096, "eval_episodes": 1}  # seconds per trial
 
 

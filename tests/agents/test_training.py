@@ -22,7 +22,7 @@ from agents.hyperparams import parse_kwargs
 from agents.loading import agent_file, load_agent
 from rolling_env.env.rollout import rollout
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _train(tmp_path, *extra, timesteps=512, scene="default", n_envs=2):

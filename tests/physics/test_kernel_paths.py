@@ -18,7 +18,7 @@ from rolling_env.env import _envkernel as EK
 from rolling_env.env.vector import BatchCore
 from rolling_env.physics import _kernel as K
 
-sys.path.insert(0, str(Path(__file__).parent))  # tests/make_golden.py
+sys.path.insert(0, str(Path(__file__).parent.parent))  # tests/make_golden.py
 
 
 def _random_cells(rng, n):
@@ -816,7 +816,7 @@ def test_inner_cells_are_never_outside_and_exact_but_within_the_margin(x_lo, n):
     assert n_near > 100, f"{n_near} ends within the margin: the test no longer probes it"
 
 
-GOLDEN = Path(__file__).parent / "data" / "golden_env.npz"
+GOLDEN = Path(__file__).parent.parent / "data" / "golden_env.npz"
 
 
 @pytest.mark.parametrize("scene", rolling_env.list_scenes())
