@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rolling_env import bench_host
-from rolling_env.bench import ratio_bound
+from rolling_env.bench_report import ratio_bound
 
 
 @pytest.mark.parametrize(

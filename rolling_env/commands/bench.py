@@ -29,7 +29,8 @@ def register(sub):
 
 
 def _run(args):
-    from ..bench import report, run
+    from ..bench import run
+    from ..bench_report import report
     from ..io import write_text
 
     out = report_out(args, DEFAULT_OUT)
