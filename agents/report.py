@@ -118,7 +118,7 @@ COLS = [
 def read_goal_log(run: Path | None):
     """A run's ``eval_goal.json`` (agents.train's periodic evaluations: env steps, wall time,
     each episode's final |error| and slip work); None without one."""
-    from .train import GOAL_LOG
+    from .train_callbacks import GOAL_LOG
 
     path = run / GOAL_LOG if run is not None else None
     if path is None or not path.exists():
