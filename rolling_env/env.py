@@ -12,7 +12,8 @@ from gymnasium import spaces
 
 from . import _envkernel as EK
 from . import _kernel as K
-from .model import Drive, DriveParams, check_flags
+from .kernel_state import check_flags
+from .model import Drive, DriveParams
 from .scenes import EPISODE_STEPS_MAX, Scene, draw_physics, episode_scene, load_scene
 
 OBS_NAMES = EK.OBS_NAMES  # the observation, in order (one list: the kernel writes it)

@@ -61,7 +61,7 @@ from .env import (
     target_option,
 )
 from .hostload import HostLoad
-from .model import CellViews
+from .kernel_state import CellViews
 from .scenes import load_scene
 from .threads import (
     PARALLEL_MIN_ENVS,
