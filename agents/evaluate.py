@@ -180,7 +180,7 @@ def evaluate_scene(
     return rows, trajectories
 
 
-def main(argv=None):
+def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m agents.evaluate", description=__doc__.splitlines()[0]
     )
@@ -218,9 +218,14 @@ def main(argv=None):
         help="compare the two Eq. 32 baselines alone (no --runs needed); without it "
         "every scene must have a trained agent under <runs>/<scene key>/",
     )
-    args = p.parse_args(argv)
+    return p
+
+
+def _check_scenes(p, scenes) -> None:
+    """Every scene builds, the baselines can drive it, and no two share a scene key; else a
+    usage error."""
     keys = {}
-    for scene in args.scenes:  # every scene checked before anything is written
+    for scene in scenes:  # every scene checked before anything is written
         try:  # the scene, that it builds, and that the baselines can drive it
             Eq32Design(buildable_scene(scene))
         except ValueError as e:
@@ -233,7 +238,10 @@ def main(argv=None):
                 "runs folder would collide; give each scene once"
             )
         keys[key] = scene
-    out, runs = Path(args.out), (None if args.baselines_only else Path(args.runs))
+
+
+def _check_folders(p, out: Path, runs: Path | None) -> None:
+    """``runs`` (None: baselines only) exists and ``out`` takes files; else a usage error."""
     if runs is not None and not runs.is_dir():  # a mistyped --runs would replace the
         # committed table with a baselines-only one
         p.error(
@@ -246,11 +254,16 @@ def main(argv=None):
         probe.close()
     except OSError as e:
         p.error(f"--out: cannot write to {str(out)!r}: {e}")
+
+
+def _setups(p, scenes, runs: Path | None, model: str) -> list:
+    """(scene, env, controllers) per scene, every agent loaded and checked; a usage error
+    where one cannot be, or where a scene has no agent (unless ``runs`` is None)."""
     setups = []
-    for scene in args.scenes:  # every agent loaded and checked before any episode runs
+    for scene in scenes:  # every agent loaded and checked before any episode runs
         env = rolling_env.make(scene)
         try:
-            setups.append((scene, env, controllers_for(scene, runs, env, args.model)))
+            setups.append((scene, env, controllers_for(scene, runs, env, model)))
         except (ValueError, OSError, KeyError) as e:
             p.error(f"--runs: {e}")
         if runs is not None and set(setups[-1][2]) <= set(BASELINES):  # no agent
@@ -259,6 +272,16 @@ def main(argv=None):
                 f"{str(runs / scene_key(scene))!r} (train one, leave the scene out of "
                 "--scenes, or pass --baselines-only)"
             )
+    return setups
+
+
+def main(argv=None):
+    p = _parser()
+    args = p.parse_args(argv)
+    _check_scenes(p, args.scenes)
+    out, runs = Path(args.out), (None if args.baselines_only else Path(args.runs))
+    _check_folders(p, out, runs)
+    setups = _setups(p, args.scenes, runs, args.model)
     rows, plots = [], []
     for scene, env, ctrls in setups:
         r, traj = evaluate_scene(scene, runs, args.episodes, env, ctrls)

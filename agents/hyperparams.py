@@ -275,7 +275,7 @@ def _algo_class(algo: str):
     return {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[algo]
 
 
-def check_hyperparams(algo: str, hp: dict) -> dict:  # noqa: C901 (one check per key of an RL Zoo entry)
+def check_hyperparams(algo: str, hp: dict) -> dict:
     """Validate an entry of the hyper-parameter YAML for ``algo``: every key is either an RL
     Zoo key the script handles (``ZOO_KEYS``) or a keyword of the algorithm's ``__init__``
     (found with ``inspect.signature``), with a value of the type SB3 annotates and in
@@ -288,7 +288,6 @@ def check_hyperparams(algo: str, hp: dict) -> dict:  # noqa: C901 (one check per
     "kwargs" (for the algorithm)}``;
     ``n_timesteps`` is None when the entry has none."""
     import inspect
-    import numbers
 
     cls = _algo_class(algo)
     params = inspect.signature(cls.__init__).parameters
@@ -312,66 +311,83 @@ def check_hyperparams(algo: str, hp: dict) -> dict:  # noqa: C901 (one check per
             f"flat vector), got {policy!r}"
         )
     out["policy"] = policy
-    try:
-        norm = parse_kwargs(hp.get("normalize", False))
-    except ValueError as e:
-        raise ValueError(f"hyper-parameter 'normalize': {e}") from None
-    if norm is not None:
-        from stable_baselines3.common.vec_env import VecNormalize
-
-        allowed = set(inspect.signature(VecNormalize.__init__).parameters) - {
-            "self",
-            "venv",
-            "training",
-            "gamma",
-            "norm_obs_keys",
-        }
-        bad = sorted(set(norm) - allowed)
-        if bad:
-            raise ValueError(
-                f"hyper-parameter 'normalize': unknown key(s) {bad} (VecNormalize "
-                f"takes {sorted(allowed)}; gamma is the algorithm's)"
-            )
-        for k, x in list(norm.items()):
-            if k in ("norm_obs", "norm_reward") and not isinstance(x, bool):
-                raise ValueError(
-                    f"hyper-parameter 'normalize': {k} must be true or false, got {x!r}"
-                )
-            if k in ("clip_obs", "clip_reward", "epsilon") and (
-                isinstance(x, bool) or not isinstance(x, numbers.Real) or not x > 0
-            ):
-                raise ValueError(
-                    f"hyper-parameter 'normalize': {k} must be a number > 0, got {x!r}"
-                )
-    out["normalize"] = norm
+    out["normalize"] = _check_normalize(hp.get("normalize", False))
     env_kwargs = hp.get("env_kwargs") or {}
     if not isinstance(env_kwargs, dict):
         raise ValueError(f"hyper-parameter 'env_kwargs' must be a mapping, got {env_kwargs!r}")
     out["env_kwargs"] = dict(env_kwargs)
+    out["action_noise"] = _check_action_noise(hp, cls.__name__, "action_noise" in params)
+    out["residual"], out["period_actions"] = _check_residual_and_period(hp)
+    out["kwargs"] = _algo_kwargs(
+        algo, cls, params, {k: v for k, v in hp.items() if k not in script}
+    )
+    return out
+
+
+def _check_normalize(value):
+    """The ``normalize`` entry as VecNormalize's keywords (None: no normalisation)."""
+    import inspect
+    import numbers
+
+    try:
+        norm = parse_kwargs(value)
+    except ValueError as e:
+        raise ValueError(f"hyper-parameter 'normalize': {e}") from None
+    if norm is None:
+        return None
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    allowed = set(inspect.signature(VecNormalize.__init__).parameters) - {
+        "self",
+        "venv",
+        "training",
+        "gamma",
+        "norm_obs_keys",
+    }
+    bad = sorted(set(norm) - allowed)
+    if bad:
+        raise ValueError(
+            f"hyper-parameter 'normalize': unknown key(s) {bad} (VecNormalize "
+            f"takes {sorted(allowed)}; gamma is the algorithm's)"
+        )
+    for k, x in list(norm.items()):
+        if k in ("norm_obs", "norm_reward") and not isinstance(x, bool):
+            raise ValueError(f"hyper-parameter 'normalize': {k} must be true or false, got {x!r}")
+        if k in ("clip_obs", "clip_reward", "epsilon") and (
+            isinstance(x, bool) or not isinstance(x, numbers.Real) or not x > 0
+        ):
+            raise ValueError(f"hyper-parameter 'normalize': {k} must be a number > 0, got {x!r}")
+    return norm
+
+
+def _check_action_noise(hp, algo_name, takes_noise):
+    """``noise_type`` / ``noise_std`` as a (type, std) pair, or None when neither is set."""
     noise_type, noise_std = hp.get("noise_type"), hp.get("noise_std")
-    if noise_type is not None or noise_std is not None:
-        if "action_noise" not in params:
-            raise ValueError(
-                f"hyper-parameter 'noise_type' / 'noise_std': {cls.__name__} takes no action noise"
-            )
-        if noise_type not in NOISE_TYPES:
-            raise ValueError(
-                f"hyper-parameter 'noise_type' must be one of {NOISE_TYPES} (with "
-                f"noise_std), got {noise_type!r}"
-            )
-        if noise_std is None:
-            raise ValueError("hyper-parameter 'noise_std' is required with noise_type")
-        out["action_noise"] = (noise_type, _number("noise_std", noise_std))
-    else:
-        out["action_noise"] = None
-    out["residual"] = None
+    if noise_type is None and noise_std is None:
+        return None
+    if not takes_noise:
+        raise ValueError(
+            f"hyper-parameter 'noise_type' / 'noise_std': {algo_name} takes no action noise"
+        )
+    if noise_type not in NOISE_TYPES:
+        raise ValueError(
+            f"hyper-parameter 'noise_type' must be one of {NOISE_TYPES} (with "
+            f"noise_std), got {noise_type!r}"
+        )
+    if noise_std is None:
+        raise ValueError("hyper-parameter 'noise_std' is required with noise_type")
+    return (noise_type, _number("noise_std", noise_std))
+
+
+def _check_residual_and_period(hp):
+    """The ``residual`` (None or a (base, scale) pair) and ``period_actions`` (bool) entries,
+    which exclude each other."""
+    residual = None
     if hp.get("residual") is not None:
         from .residual import SCALE_DEFAULT, check_residual
 
         try:
-            out["residual"] = check_residual(
-                hp["residual"], hp.get("residual_scale", SCALE_DEFAULT)
-            )
+            residual = check_residual(hp["residual"], hp.get("residual_scale", SCALE_DEFAULT))
         except ValueError as e:
             raise ValueError(f"hyper-parameter {e}") from None
     elif hp.get("residual_scale") is not None:
@@ -382,18 +398,24 @@ def check_hyperparams(algo: str, hp: dict) -> dict:  # noqa: C901 (one check per
     from .period import check_period_actions
 
     try:
-        out["period_actions"] = check_period_actions(hp.get("period_actions", False))
+        period = check_period_actions(hp.get("period_actions", False))
     except ValueError as e:
         raise ValueError(f"hyper-parameter {e}") from None
-    if out["period_actions"] and out["residual"] is not None:
+    if period and residual is not None:
         raise ValueError(
             "hyper-parameters 'period_actions' and 'residual' exclude each other (a period "
             "action is a working point, not a correction of a tick's action)"
         )
+    return residual, period
+
+
+def _algo_kwargs(algo, cls, params, entries):
+    """The keywords for the algorithm class ``cls`` (``params``: its ``__init__``'s) from the
+    entries that are not the script's, each checked against its annotation."""
+    import inspect
+
     kwargs = {}
-    for k, v in hp.items():
-        if k in script:
-            continue
+    for k, v in entries.items():
         if k in _SET_BY_SCRIPT:
             raise ValueError(
                 f"hyper-parameter {k!r} cannot be set in the YAML: {_SET_BY_SCRIPT[k]}"
@@ -415,8 +437,7 @@ def check_hyperparams(algo: str, hp: dict) -> dict:  # noqa: C901 (one check per
                 f"{pol.__name__} (allowed: {sorted(allowed)})"
             )
         kwargs["policy_kwargs"] = check_policy_kwargs(algo, kwargs["policy_kwargs"])
-    out["kwargs"] = kwargs
-    return out
+    return kwargs
 
 
 # ----------------------------------------------------------------- policy_kwargs

@@ -90,32 +90,56 @@ def load_agent(path, env=None, base_scene=None):
     config.yml where there is one.  A model without statistics is refused where its run's
     config.yml says the run normalised observations, and loaded with a warning where there is
     no config.yml to tell."""
-    import stable_baselines3 as sb3
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
-
-    from rolling_env.env.drive_env import OBS_NAMES
-
-    from .hyperparams import parse_kwargs
-    from .period import N_ACTION as N_PERIOD_ACTION
-    from .residual import N_BASE, ResidualAgent, ResidualVecEnv
+    from .residual import ResidualAgent
 
     path = Path(path)
-    cfg_path = path.parent / "config.yml"
     cfg = run_config(path.parent)  # None without one; a damaged one is a ValueError
+    model = _load_model(path, cfg)
+    residual = _residual_of(cfg, path)
+    _check_observation_width(model, path, residual)
+    period = _period_of(cfg, path)
+    _check_action_width(model, path, period)
+    agent = NormalizedAgent(model, _load_statistics(path, model, cfg, env, residual))
+    if residual is None and not period:
+        return agent
+    # the baseline, or the decoding of a period action, of the scene the agent knows
+    scene = (
+        base_scene
+        if base_scene is not None
+        else (env.unwrapped.scene if env is not None else _trained_scene(cfg))
+    )
+    if residual is not None:
+        return ResidualAgent(agent, *residual, scene)
+    from .period import PeriodAgent
+
+    return PeriodAgent(agent, scene)
+
+
+def _load_model(path: Path, cfg: dict | None):
+    """The SB3 model of ``path``, its algorithm read from the zip and checked against the
+    run's config.yml ``cfg`` (None: none to check against)."""
+    import stable_baselines3 as sb3
+
     algo = model_algo(path)
     if cfg is not None and cfg.get("algo", algo) != algo:
         raise ValueError(
-            f"{path.name} was saved by {algo.upper()} but {cfg_path} says algo "
-            f"{cfg.get('algo')!r}: the model does not belong to this run"
+            f"{path.name} was saved by {algo.upper()} but {path.parent / 'config.yml'} says "
+            f"algo {cfg.get('algo')!r}: the model does not belong to this run"
         )
     cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[algo]
     try:
-        model = cls.load(path, device="cpu")
+        return cls.load(path, device="cpu")
     except Exception as e:  # noqa: BLE001  (a damaged policy.pth: torch's RuntimeError, ...)
         raise _load_error(path, e) from None
-    stats = path.with_name(path.stem + "_vecnormalize.pkl")
-    vecnorm = None
-    residual = _residual_of(cfg, path)
+
+
+def _check_observation_width(model, path: Path, residual) -> None:
+    """Refuse a residual model (told by its observation width) whose run's config.yml, which
+    names its baseline, is not beside it (``residual`` None)."""
+    from rolling_env.env.drive_env import OBS_NAMES
+
+    from .residual import N_BASE
+
     width = getattr(model.observation_space, "shape", (0,))[0]
     if residual is None and width == len(OBS_NAMES) + N_BASE:
         raise ValueError(
@@ -123,7 +147,13 @@ def load_agent(path, env=None, base_scene=None):
             f"{len(OBS_NAMES)} and its baseline's action), and the config.yml of "
             "its run, which names the baseline, is not beside it"
         )
-    period = _period_of(cfg, path)
+
+
+def _check_action_width(model, path: Path, period: bool) -> None:
+    """Refuse a period-level model (told by its action width) whose run's config.yml, which
+    says so, is not beside it (``period`` False)."""
+    from .period import N_ACTION as N_PERIOD_ACTION
+
     n_act = getattr(model.action_space, "shape", (0,))[0]
     if not period and n_act == N_PERIOD_ACTION:
         raise ValueError(
@@ -131,6 +161,18 @@ def load_agent(path, env=None, base_scene=None):
             "working point per period), and the config.yml of its run, which says so, is "
             "not beside it"
         )
+
+
+def _load_statistics(path: Path, model, cfg: dict | None, env, residual):
+    """The frozen VecNormalize statistics saved beside the model (None without them), checked
+    to be saved with it; their absence refused where the run's config.yml says it normalised
+    observations, and warned about where there is no config.yml."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from .hyperparams import parse_kwargs
+    from .residual import ResidualVecEnv
+
+    stats = path.with_name(path.stem + "_vecnormalize.pkl")
     if stats.exists():
         scene = env.unwrapped.scene if env is not None else "default"
         venv = DummyVecEnv([lambda: rolling_env.make(scene)])
@@ -151,7 +193,8 @@ def load_agent(path, env=None, base_scene=None):
             )
         vecnorm.training = False
         vecnorm.norm_reward = False
-    elif cfg is not None:
+        return vecnorm
+    if cfg is not None:
         try:
             norm = parse_kwargs(cfg.get("normalize", False))
         except ValueError:
@@ -169,20 +212,7 @@ def load_agent(path, env=None, base_scene=None):
             "default), copy its statistics beside the model",
             file=sys.stderr,
         )
-    agent = NormalizedAgent(model, vecnorm)
-    if residual is None and not period:
-        return agent
-    # the baseline, or the decoding of a period action, of the scene the agent knows
-    scene = (
-        base_scene
-        if base_scene is not None
-        else (env.unwrapped.scene if env is not None else _trained_scene(cfg))
-    )
-    if residual is not None:
-        return ResidualAgent(agent, *residual, scene)
-    from .period import PeriodAgent
-
-    return PeriodAgent(agent, scene)
+    return None
 
 
 def _residual_of(cfg: dict | None, path: Path):
@@ -276,16 +306,7 @@ def check_run_scene(run: Path, scene, by_key: bool = True) -> str:
     is checked by the scene's name, with a warning."""
     from rolling_env.env.scenes import Scene
 
-    from .common import (
-        NUMERICS_KEYS,
-        REWARD_KEYS,
-        completed_fields,
-        differing_fields,
-        fields_digest,
-        numerics_note,
-        scene_fields,
-        scene_key,
-    )
+    from .common import REWARD_KEYS
 
     cfg = run_config(run)  # a damaged config.yml: a ValueError naming it
     if cfg is None:
@@ -320,6 +341,25 @@ def check_run_scene(run: Path, scene, by_key: bool = True) -> str:
             file=sys.stderr,
         )
         return ""
+    return _numerics_difference(run, cfg, scene, name)
+
+
+def _numerics_difference(run: Path, cfg: dict, scene, name: str) -> str:
+    """What differs between the scene content recorded in a run's config.yml ``cfg`` and
+    ``scene``'s now ("" where nothing does; a warning printed where something does); a
+    ValueError where anything but the numerics and reward weights differs, or where the
+    recorded fields do not reproduce the recorded digest and the digests differ."""
+    from .common import (
+        NUMERICS_KEYS,
+        REWARD_KEYS,
+        completed_fields,
+        differing_fields,
+        fields_digest,
+        numerics_note,
+        scene_fields,
+    )
+
+    digest = cfg["scene_digest"]
     now = scene_fields(scene)
     if digest == fields_digest(now):
         return ""

@@ -54,93 +54,101 @@ def _matrix(rs: list[dict], key: str, scale: float = 1.0) -> np.ndarray:
     return np.array([np.asarray(r[key], float) / scale for r in rs])
 
 
+def _intervals(scores: dict, func, reps: int, seed: int):
+    """rliable's point estimates and stratified bootstrap intervals of ``func`` over
+    ``scores`` ({configuration: runs x targets}), ``reps`` resamples drawn with ``seed``."""
+    import warnings
+
+    from rliable import library as rly
+
+    # rliable's stratified bootstraps draw from numpy's global generator: seeded here
+    # for tables that regenerate exactly, and the caller's state put back after
+    saved = np.random.get_state()
+    np.random.seed(seed)
+    try:
+        with warnings.catch_warnings():  # rliable hands arch a RandomState, which
+            warnings.filterwarnings(
+                "ignore", message="random_state is deprecated", category=FutureWarning
+            )  # arch will stop taking
+            return rly.get_interval_estimates(
+                scores, func, reps=reps, confidence_interval_size=CONFIDENCE
+            )
+    finally:
+        np.random.set_state(saved)
+
+
 def seed_statistics(
     rows: list[dict], reps: int = REPS, seed: int = SEED, reps_poi: int = REPS_POI
 ) -> list[dict]:
     """One dict per scene and configuration (see the module): rows from
     ``evaluate.evaluate_scene`` (with their per-episode lists)."""
-    import warnings
-
-    from rliable import library as rly
-    from rliable import metrics
-
-    from .verdicts import BASELINES, goal_verdicts
-
-    def intervals(scores, func, n):
-        # rliable's stratified bootstraps draw from numpy's global generator: seeded here
-        # for tables that regenerate exactly, and the caller's state put back after
-        saved = np.random.get_state()
-        np.random.seed(seed)
-        try:
-            with warnings.catch_warnings():  # rliable hands arch a RandomState, which
-                warnings.filterwarnings(
-                    "ignore", message="random_state is deprecated", category=FutureWarning
-                )  # arch will stop taking
-                return rly.get_interval_estimates(
-                    scores, func, reps=n, confidence_interval_size=CONFIDENCE
-                )
-        finally:
-            np.random.set_state(saved)
+    from .verdicts import goal_verdicts
 
     verdicts = {(v["scene"], v["agent"]): v["met"] for v in goal_verdicts(rows)}
     groups = _groups(rows)
     out = []
     for scene in dict.fromkeys(r["scene"] for r in rows):
-        keys = [k for k in groups if k[0] == scene]
-        err, slip, iqm = {}, {}, {}
-        for k in keys:
-            rs = groups[k]
-            tol = rs[0]["tolerance"]
-            err[k[1]] = _matrix(rs, "episode_final_abs_error", tol)
-            slip[k[1]] = _matrix(rs, "episode_slip_work", 1e-9)  # nJ
-        pt_e, ci_e = intervals(err, metrics.aggregate_iqm, reps)
-        pt_s, ci_s = intervals(slip, metrics.aggregate_iqm, reps)
-        for name in err:
-            iqm[name] = float(np.asarray(pt_e[name]).reshape(-1)[0])
-        bases = [b for b in BASELINES if b in err]
-        # the better baseline as the goal tables choose it: the lower mean final error
-        best = min(bases, key=lambda b: float(err[b].mean())) if bases else None
-        pairs = {
-            name: (-err[name], -err[best])
-            for name in err
-            if best is not None and name not in BASELINES
+        configs = {k[1]: rs for k, rs in groups.items() if k[0] == scene}
+        out += _scene_statistics(scene, configs, verdicts, reps, seed, reps_poi)
+    return out
+
+
+def _scene_statistics(scene, configs: dict, verdicts: dict, reps, seed, reps_poi) -> list:
+    """``seed_statistics``' dicts of one scene (``configs``: {configuration: its rows};
+    ``verdicts``: {(scene, agent): goal met})."""
+    from rliable import metrics
+
+    from .verdicts import BASELINES
+
+    err, slip = {}, {}
+    for name, rs in configs.items():
+        tol = rs[0]["tolerance"]
+        err[name] = _matrix(rs, "episode_final_abs_error", tol)
+        slip[name] = _matrix(rs, "episode_slip_work", 1e-9)  # nJ
+    pt_e, ci_e = _intervals(err, metrics.aggregate_iqm, reps, seed)
+    pt_s, ci_s = _intervals(slip, metrics.aggregate_iqm, reps, seed)
+    iqm = {name: float(np.asarray(pt_e[name]).reshape(-1)[0]) for name in err}
+    bases = [b for b in BASELINES if b in err]
+    # the better baseline as the goal tables choose it: the lower mean final error
+    best = min(bases, key=lambda b: float(err[b].mean())) if bases else None
+    pairs = {
+        name: (-err[name], -err[best]) for name in err if best is not None and name not in BASELINES
+    }
+    if pairs:
+        pt_p, ci_p = _intervals(pairs, metrics.probability_of_improvement, reps_poi, seed)
+    out = []
+    for name, rs in configs.items():
+        lo, hi = np.asarray(ci_e[name]).reshape(2)
+        s_lo, s_hi = np.asarray(ci_s[name]).reshape(2)
+        row = {
+            "scene": scene,
+            "config": name,
+            "runs": len(rs),
+            "episodes": err[name].shape[1],
+            "baseline": best,
+            "iqm_error": iqm[name],
+            "iqm_error_lo": float(lo),
+            "iqm_error_hi": float(hi),
+            "iqm_slip": float(np.asarray(pt_s[name]).reshape(-1)[0]),
+            "iqm_slip_lo": float(s_lo),
+            "iqm_slip_hi": float(s_hi),
+            "controllers": [r["controller"] for r in rs],
+            "trained_numerics": sorted({r.get("trained_numerics") or "" for r in rs}),
         }
-        if pairs:
-            pt_p, ci_p = intervals(pairs, metrics.probability_of_improvement, reps_poi)
-        for k in keys:
-            name = k[1]
-            rs = groups[k]
-            lo, hi = np.asarray(ci_e[name]).reshape(2)
-            s_lo, s_hi = np.asarray(ci_s[name]).reshape(2)
-            row = {
-                "scene": scene,
-                "config": name,
-                "runs": len(rs),
-                "episodes": err[name].shape[1],
-                "baseline": best,
-                "iqm_error": iqm[name],
-                "iqm_error_lo": float(lo),
-                "iqm_error_hi": float(hi),
-                "iqm_slip": float(np.asarray(pt_s[name]).reshape(-1)[0]),
-                "iqm_slip_lo": float(s_lo),
-                "iqm_slip_hi": float(s_hi),
-                "controllers": [r["controller"] for r in rs],
-                "trained_numerics": sorted({r.get("trained_numerics") or "" for r in rs}),
-            }
-            if name in pairs:
-                p_lo, p_hi = np.asarray(ci_p[name]).reshape(2)
-                met = [verdicts[(scene, c)] for c in row["controllers"] if (scene, c) in verdicts]
-                ratio_hi = row["iqm_error_hi"] / iqm[best] if iqm[best] > 0 else np.inf
-                row.update(
-                    poi=float(np.asarray(pt_p[name]).reshape(-1)[0]),
-                    poi_lo=float(p_lo),
-                    poi_hi=float(p_hi),
-                    met=sum(met),
-                    judged=len(met),
-                    iqm_ratio_hi=float(ratio_hi),
-                    holds=bool(met and sum(met) >= MIN_SHARE * len(met) and ratio_hi < 0.5),
-                )
-            out.append(row)
+        if name in pairs:
+            p_lo, p_hi = np.asarray(ci_p[name]).reshape(2)
+            met = [verdicts[(scene, c)] for c in row["controllers"] if (scene, c) in verdicts]
+            ratio_hi = row["iqm_error_hi"] / iqm[best] if iqm[best] > 0 else np.inf
+            row.update(
+                poi=float(np.asarray(pt_p[name]).reshape(-1)[0]),
+                poi_lo=float(p_lo),
+                poi_hi=float(p_hi),
+                met=sum(met),
+                judged=len(met),
+                iqm_ratio_hi=float(ratio_hi),
+                holds=bool(met and sum(met) >= MIN_SHARE * len(met) and ratio_hi < 0.5),
+            )
+        out.append(row)
     return out
 
 

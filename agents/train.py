@@ -56,6 +56,7 @@ from .residual import BASES as RESIDUAL_BASES
 from .residual import SCALE_DEFAULT as RESIDUAL_SCALE
 from .residual import ResidualVecEnv
 from .run_folder import RUN_MARKER, _not_a_run, _replace_run, staging_folder
+from .train_callbacks import _AtomicCheckpoint, _eval_callback, ticks_per_step
 from .vec_choice import VEC_ENVS, choose_vec_env
 
 SEED_MAX = 2**31 - 1 - 10_000  # the evaluation env is seeded seed + 10000
@@ -91,6 +92,14 @@ def source_commit() -> str | None:
 
 def build_parser():
     p = argparse.ArgumentParser(prog="python -m agents.train", description=__doc__.splitlines()[0])
+    _add_run_args(p)
+    _add_schedule_args(p)
+    _add_env_args(p)
+    return p
+
+
+def _add_run_args(p) -> None:
+    """The algorithm, scene, seed, budget, hyper-parameter file and run folder."""
     p.add_argument("--algo", choices=ALGOS, required=True)
     p.add_argument("--scene", default="default", help="scene name or YAML path")
     p.add_argument("--seed", type=positive_int("seed", 0, SEED_MAX), default=0)
@@ -122,6 +131,10 @@ def build_parser():
         "the new run's files, its checkpoint.zip among them, stay in "
         "<run-dir>.overwrite)",
     )
+
+
+def _add_schedule_args(p) -> None:
+    """How often the run evaluates and saves checkpoints, and its progress bar."""
     p.add_argument(
         "--eval-freq",
         type=positive_int("eval-freq", 1, 10**12),
@@ -138,6 +151,10 @@ def build_parser():
         "--period-actions)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _add_env_args(p) -> None:
+    """The training vector env, the residual or period-level action, and the env's threads."""
     p.add_argument(
         "--vec-env",
         choices=("auto",) + VEC_ENVS,
@@ -179,125 +196,6 @@ def build_parser():
         "the threaded kernel, chosen step by step from measured step times) or "
         "1 (serial kernel) to NUMBA_NUM_THREADS",
     )
-    return p
-
-
-class _AtomicCheckpoint:
-    """SB3 callback factory: periodic atomic checkpoints (model + VecNormalize)."""
-
-    @staticmethod
-    def make(folder, every_env_steps):
-        from stable_baselines3.common.callbacks import BaseCallback
-
-        class Cb(BaseCallback):
-            def _on_step(self):
-                n = self.model.num_timesteps
-                if n // every_env_steps > getattr(self, "_last", 0):
-                    self._last = n // every_env_steps
-                    save_model(self.model, self.model.get_vec_normalize_env(), folder, "checkpoint")
-                return True
-
-        return Cb()
-
-
-def ticks_per_step(venv) -> int:
-    """Env ticks in one step of a (wrapped) training env: a period-level env's period, else
-    1 (its steps are the env's ticks)."""
-    while venv is not None:
-        ex = getattr(venv, "excitation", None)
-        if ex is not None:
-            return int(ex.ticks)
-        venv = getattr(venv, "venv", None)
-    return 1
-
-
-def _eval_callback(
-    eval_env, run: Path, eval_freq: int, n_episodes: int, on_eval=None, tol: float | None = None
-):
-    """SB3's EvalCallback with every file written atomically: it logs to a scratch folder
-    (``run/.eval_scratch``, removed at the end) and after each evaluation the log is copied
-    atomically to ``run/evaluations.npz``; a new best model is saved atomically as
-    ``best_model.zip`` with the VecNormalize statistics of that moment beside it
-    (``best_model_vecnormalize.pkl``: the statistics it was selected with).  ``GOAL_LOG``
-    keeps, per evaluation, the env steps, the wall time since the start of training and
-    each episode's final |error| and slip work (``agents.evaluate``'s time to goal).  ``on_eval``,
-    if given, is called after each evaluation with (steps of the training env, as
-    ``n_timesteps`` counts them, and the mean eval reward)."""
-    from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
-
-    scratch = run / ".eval_scratch"
-    t0 = time.perf_counter()
-    per_step = ticks_per_step(eval_env)  # env steps (ticks) in a step of the training env
-    log: list = []
-
-    class GoalEval(EvalCallback):
-        """EvalCallback that also keeps, per evaluation episode, the final |error| [m] and
-        the slip work [J] (from the single env's info), for the time to goal."""
-
-        def _on_step(self):
-            if self.eval_freq > 0 and self.n_calls % self.eval_freq == 0:  # evaluates now
-                self._goal_eps, self._slip = [], {}
-            return super()._on_step()
-
-        def _log_success_callback(self, locals_, globals_):
-            super()._log_success_callback(locals_, globals_)
-            info, i = locals_["info"], locals_["i"]
-            self._slip[i] = self._slip.get(i, 0.0) + float(info.get("slip_work", 0.0))
-            if locals_["done"] and "xstar" in info:
-                self._goal_eps.append(
-                    (abs(float(info["target"]) - float(info["xstar"])), self._slip.pop(i))
-                )
-
-    class OnNewBest(BaseCallback):
-        def _on_step(self):
-            save_model(self.model, self.model.get_vec_normalize_env(), run, "best_model")
-            return True
-
-    class AfterEval(BaseCallback):
-        def _on_step(self):
-            src = scratch / "evaluations.npz"
-            if src.exists():
-                atomic_write(
-                    run / "evaluations.npz", lambda p: Path(p).write_bytes(src.read_bytes())
-                )
-            eps = getattr(self.parent, "_goal_eps", [])
-            if eps:
-                log.append(
-                    {
-                        "env_steps": int(self.num_timesteps) * per_step,
-                        "wall_seconds": round(time.perf_counter() - t0, 2),
-                        "final_abs_error": [e for e, _ in eps],
-                        "slip_work": [w for _, w in eps],
-                    }
-                )
-                atomic_write(run / GOAL_LOG, lambda p: Path(p).write_text(json.dumps(log)))
-                if tol:  # one line per evaluation: what a user watches a run by
-                    err = sum(e for e, _ in eps) / len(eps) / tol
-                    slip = sum(w for _, w in eps) / len(eps)
-                    print(
-                        f"eval at {self.num_timesteps * per_step:,} env steps: mean reward "
-                        f"{self.parent.last_mean_reward:.2f}, final |error| {err:.2f} "
-                        f"tolerance, slip work {slip:.3g} J",
-                        flush=True,
-                    )
-            if on_eval is not None:
-                on_eval(int(self.num_timesteps), float(self.parent.last_mean_reward))
-            return True
-
-    return GoalEval(
-        eval_env,
-        best_model_save_path=None,
-        log_path=str(scratch),
-        eval_freq=eval_freq,
-        n_eval_episodes=n_episodes,
-        deterministic=True,
-        verbose=0,
-        callback_on_new_best=OnNewBest(),
-        callback_after_eval=AfterEval(),
-    )
-
-
-GOAL_LOG = "eval_goal.json"  # final errors and slip work of the periodic evaluations
 
 
 def num_threads_arg(text):
@@ -341,9 +239,7 @@ def _wrap_actions(env, eval_env, checked: dict, hp: dict):
 def _setup(args, command=None):
     """Hyper-parameters, envs (the scene checked) and the model; then the run folder with its
     config, so that a bad scene or hyper-parameter leaves nothing behind."""
-    import stable_baselines3 as sb3
     from stable_baselines3.common.utils import set_random_seed
-    from stable_baselines3.common.vec_env import VecNormalize
 
     scene = args.scene
     try:  # the scene checked, and that it builds (a one-line error naming the flag if not)
@@ -351,34 +247,12 @@ def _setup(args, command=None):
     except ValueError as e:
         raise ValueError(f"--scene: {e}") from None
     key = scene_key(scene)
-    hp = load_hyperparams(args.algo, key, args.conf)
-    if args.residual is not None:
-        hp["residual"] = args.residual
-    if args.residual_scale is not None:
-        hp["residual_scale"] = args.residual_scale
-    if getattr(args, "period_actions", None):
-        hp["period_actions"] = True
-    if args.n_timesteps is None and "n_timesteps" not in hp:
-        raise KeyError("n_timesteps")
-    checked = check_hyperparams(args.algo, hp)  # every key used or refused, naming it
+    hp, checked = _checked_entry(args, key)
     n_envs = args.n_envs if args.n_envs is not None else checked["n_envs"]
     n_timesteps = args.n_timesteps if args.n_timesteps is not None else checked["n_timesteps"]
     env_kwargs = checked["env_kwargs"]
     set_random_seed(args.seed)
-    try:
-        kind, vec_env = choose_vec_env(args.vec_env, scene, n_envs, env_kwargs, args.num_threads)
-        env = make_vec_env(
-            scene, n_envs, args.seed, env_kwargs, kind=kind, num_threads=args.num_threads
-        )
-    except ValueError as e:  # scene overrides in env_kwargs
-        if "(randomize)" in str(e):  # --vec-env batched on a randomised scene
-            raise ValueError(f"--vec-env batched: {e}") from None
-        raise ValueError(f"hyper-parameter 'env_kwargs': {e}") from None
-    trained = env.get_attr("scene", [0])[0]  # with the overrides of env_kwargs applied
-    vec_env["num_threads"] = "auto" if args.num_threads is None else args.num_threads
-    # single envs: their infos carry x*, the target and the slip work (for GOAL_LOG); the
-    # transitions are those of the batched env
-    eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs, kind="dummy")
+    env, eval_env, trained, vec_env = _make_envs(args, n_envs, env_kwargs)
     env, eval_env, hp = _wrap_actions(env, eval_env, checked, hp)
     check_policy(args.algo, checked["kwargs"], env)  # torch's errors named policy_kwargs
     name = args.algo + (
@@ -389,49 +263,8 @@ def _setup(args, command=None):
         else ""
     )
     run = Path(args.run_dir or f"runs/{key}/{name}_seed{args.seed}")
-    work = run  # the folder trained into: the run folder, or its staging folder
-    if run.is_symlink() or (run.exists() and (not run.is_dir() or any(run.iterdir()))):
-        # a second run into the same folder would mix its files with the first's (and its
-        # first checkpoint would overwrite an interrupted run's): refuse, keep what is there
-        if not args.overwrite:
-            raise UsageError(
-                f"run folder {str(run)!r} already exists and is not empty: give "
-                "another --run-dir or --seed, or --overwrite to replace it"
-            )
-        why = _not_a_run(run)
-        if why:
-            raise UsageError(
-                f"--overwrite replaces only a run folder written by this script; "
-                f"{str(run)!r} {why}: nothing was deleted"
-            )
-        work = staging_folder(run)  # the earlier run stays until the new one has finished
-        if work.exists() or work.is_symlink():
-            raise UsageError(
-                f"--overwrite trains into {str(work)!r} first, and it exists "
-                "(left by an interrupted or failed --overwrite run, with its "
-                "checkpoint): move or delete it first; nothing was deleted"
-            )
-    norm = checked["normalize"]
-    if norm is not None:
-        env = VecNormalize(env, gamma=float(checked["kwargs"].get("gamma", 0.99)), **norm)
-        eval_env = VecNormalize(
-            eval_env, training=False, norm_reward=False, norm_obs=norm.get("norm_obs", True)
-        )
-    kwargs = dict(checked["kwargs"])
-    kwargs.pop("policy_kwargs", None)
-    if checked["action_noise"] is not None:
-        kwargs["action_noise"] = action_noise(checked["action_noise"], env.action_space.shape[0])
-    cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[args.algo]
-    model = cls(
-        checked["policy"],
-        env,
-        seed=args.seed,
-        verbose=0,
-        device="cpu",
-        tensorboard_log=str(work / "tb"),
-        policy_kwargs=checked["kwargs"].get("policy_kwargs"),
-        **kwargs,
-    )
+    work = _work_folder(run, args.overwrite)  # the run folder, or its staging folder
+    model, eval_env = _make_model(args, checked, env, eval_env, work)
     work.mkdir(parents=True, exist_ok=True)  # an empty run folder is simply used
     atomic_write(
         work / RUN_MARKER,
@@ -459,6 +292,102 @@ def _setup(args, command=None):
     return model, eval_env, run, work, n_envs, n_timesteps, trained, vec_env
 
 
+def _checked_entry(args, key: str):
+    """The hyper-parameter entry of the scene key ``key`` with the command line's overrides,
+    and ``check_hyperparams``' result; a KeyError where no budget is given."""
+    hp = load_hyperparams(args.algo, key, args.conf)
+    if args.residual is not None:
+        hp["residual"] = args.residual
+    if args.residual_scale is not None:
+        hp["residual_scale"] = args.residual_scale
+    if getattr(args, "period_actions", None):
+        hp["period_actions"] = True
+    if args.n_timesteps is None and "n_timesteps" not in hp:
+        raise KeyError("n_timesteps")
+    return hp, check_hyperparams(args.algo, hp)  # every key used or refused, naming it
+
+
+def _make_envs(args, n_envs: int, env_kwargs: dict):
+    """The training vector env (of the kind ``--vec-env`` chooses), the evaluation env, the
+    scene trained on (with the overrides of env_kwargs applied) and the vector env's record
+    for meta.json."""
+    scene = args.scene
+    try:
+        kind, vec_env = choose_vec_env(args.vec_env, scene, n_envs, env_kwargs, args.num_threads)
+        env = make_vec_env(
+            scene, n_envs, args.seed, env_kwargs, kind=kind, num_threads=args.num_threads
+        )
+    except ValueError as e:  # scene overrides in env_kwargs
+        if "(randomize)" in str(e):  # --vec-env batched on a randomised scene
+            raise ValueError(f"--vec-env batched: {e}") from None
+        raise ValueError(f"hyper-parameter 'env_kwargs': {e}") from None
+    trained = env.get_attr("scene", [0])[0]  # with the overrides of env_kwargs applied
+    vec_env["num_threads"] = "auto" if args.num_threads is None else args.num_threads
+    # single envs: their infos carry x*, the target and the slip work (for GOAL_LOG); the
+    # transitions are those of the batched env
+    eval_env = make_vec_env(scene, 1, args.seed + 10_000, env_kwargs, kind="dummy")
+    return env, eval_env, trained, vec_env
+
+
+def _work_folder(run: Path, overwrite: bool) -> Path:
+    """The folder to train into: ``run``, or with ``overwrite`` a staging folder beside an
+    earlier run that this script wrote (replaced once the new run has finished).  A
+    UsageError, with nothing deleted, where a run folder holds files and cannot be replaced."""
+    if not (run.is_symlink() or (run.exists() and (not run.is_dir() or any(run.iterdir())))):
+        return run
+    # a second run into the same folder would mix its files with the first's (and its
+    # first checkpoint would overwrite an interrupted run's): refuse, keep what is there
+    if not overwrite:
+        raise UsageError(
+            f"run folder {str(run)!r} already exists and is not empty: give "
+            "another --run-dir or --seed, or --overwrite to replace it"
+        )
+    why = _not_a_run(run)
+    if why:
+        raise UsageError(
+            f"--overwrite replaces only a run folder written by this script; "
+            f"{str(run)!r} {why}: nothing was deleted"
+        )
+    work = staging_folder(run)  # the earlier run stays until the new one has finished
+    if work.exists() or work.is_symlink():
+        raise UsageError(
+            f"--overwrite trains into {str(work)!r} first, and it exists "
+            "(left by an interrupted or failed --overwrite run, with its "
+            "checkpoint): move or delete it first; nothing was deleted"
+        )
+    return work
+
+
+def _make_model(args, checked: dict, env, eval_env, work: Path):
+    """The SB3 model on ``env`` (wrapped in VecNormalize where the entry normalises, the
+    evaluation env too) logging to ``work/tb``; returns it and the evaluation env."""
+    import stable_baselines3 as sb3
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    norm = checked["normalize"]
+    if norm is not None:
+        env = VecNormalize(env, gamma=float(checked["kwargs"].get("gamma", 0.99)), **norm)
+        eval_env = VecNormalize(
+            eval_env, training=False, norm_reward=False, norm_obs=norm.get("norm_obs", True)
+        )
+    kwargs = dict(checked["kwargs"])
+    kwargs.pop("policy_kwargs", None)
+    if checked["action_noise"] is not None:
+        kwargs["action_noise"] = action_noise(checked["action_noise"], env.action_space.shape[0])
+    cls = {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[args.algo]
+    model = cls(
+        checked["policy"],
+        env,
+        seed=args.seed,
+        verbose=0,
+        device="cpu",
+        tensorboard_log=str(work / "tb"),
+        policy_kwargs=checked["kwargs"].get("policy_kwargs"),
+        **kwargs,
+    )
+    return model, eval_env
+
+
 def train(args, *, command: str | None = None, on_eval=None) -> Path:
     """Train as the command line ``args`` (``build_parser().parse_args``) say and return the
     run folder.  ``command``: what command.txt records (default: this process's argv; a
@@ -467,11 +396,8 @@ def train(args, *, command: str | None = None, on_eval=None) -> Path:
     training env, as ``n_timesteps`` counts them).  Ctrl-C and
     SIGTERM save a checkpoint (``Interrupted``) where this runs in the main thread; in another
     thread the caller handles signals."""
-    import stable_baselines3 as sb3
     import torch
     from stable_baselines3.common.callbacks import CallbackList
-
-    import rolling_env
 
     torch.set_num_threads(1)
     try:  # an error while learning is not a usage error: it propagates with its traceback
@@ -485,7 +411,6 @@ def train(args, *, command: str | None = None, on_eval=None) -> Path:
         raise UsageError(
             f"{type(e).__name__}: {e}" if not isinstance(e, ValueError) else str(e)
         ) from e
-    scene = args.scene
     callbacks = CallbackList(
         [
             _eval_callback(
@@ -499,7 +424,22 @@ def train(args, *, command: str | None = None, on_eval=None) -> Path:
             _AtomicCheckpoint.make(work, max(args.checkpoint_freq, 1)),
         ]
     )
+    interrupted, signum, wall = _learn(model, n_timesteps, callbacks, args, run, work)
+    save_model(model, model.get_vec_normalize_env(), work, "checkpoint" if interrupted else "model")
+    meta = _meta(args, model, eval_env, trained, n_envs, wall, interrupted, vec_env)
+    atomic_write(work / "meta.json", lambda p: Path(p).write_text(json.dumps(meta, indent=1)))
+    print(json.dumps(meta))
+    if interrupted:  # saved, but not finished: the shell convention 128 + signal number
+        raise Interrupted(128 + signum, work, run if work != run else None)
+    if work != run:
+        _replace_run(run, work)
+    return run
 
+
+def _learn(model, n_timesteps: int, callbacks, args, run: Path, work: Path):
+    """``model.learn`` with SIGTERM (where this runs in the main thread) and Ctrl-C taken as
+    a stop; returns whether it was stopped, the signal that stopped it (SIGINT when none
+    was received) and the wall seconds."""
     received = []
 
     def on_term(signum, frame):
@@ -532,8 +472,18 @@ def train(args, *, command: str | None = None, on_eval=None) -> Path:
             signal.signal(signal.SIGTERM, old)
         shutil.rmtree(work / ".eval_scratch", ignore_errors=True)
     wall = time.perf_counter() - t0
-    save_model(model, model.get_vec_normalize_env(), work, "checkpoint" if interrupted else "model")
-    meta = {
+    return interrupted, (received[0] if received else signal.SIGINT), wall
+
+
+def _meta(args, model, eval_env, trained, n_envs, wall, interrupted, vec_env) -> dict:
+    """meta.json of a run: what was trained, how long, and with which code and machine."""
+    import stable_baselines3 as sb3
+    import torch
+
+    import rolling_env
+
+    scene = args.scene
+    return {
         "algo": args.algo,
         "scene": str(scene),
         "scene_key": scene_key(scene),
@@ -553,15 +503,6 @@ def train(args, *, command: str | None = None, on_eval=None) -> Path:
         "threads": {k: os.environ.get(k) for k in THREAD_VARS},
         "vec_env": vec_env,
     }
-    atomic_write(work / "meta.json", lambda p: Path(p).write_text(json.dumps(meta, indent=1)))
-    print(json.dumps(meta))
-    if interrupted:  # saved, but not finished: the shell convention 128 + signal number
-        raise Interrupted(
-            128 + (received[0] if received else signal.SIGINT), work, run if work != run else None
-        )
-    if work != run:
-        _replace_run(run, work)
-    return run
 
 
 class Interrupted(Exception):

@@ -30,7 +30,8 @@ def register(sub):
 
 def _run(args):
     from rolling_env.io import write_text
-    from rolling_env.studies.bench import report, run
+    from rolling_env.studies.bench import run
+    from rolling_env.studies.bench_report import report
 
     out = report_out(args, DEFAULT_OUT)
     res = run(quick=args.quick)

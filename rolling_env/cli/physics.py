@@ -6,9 +6,16 @@ import math
 
 from rolling_env.cli.main import checked_float, emit, finite_float, positive_int
 from rolling_env.physics import experiments as ex
+from rolling_env.physics.mindlin import MINDLIN_MU_MAX, MINDLIN_POINTS_MAX, mindlin
 
 
 def register(sub):
+    _register_working_point(sub)
+    _register_simulate(sub)
+    _register_mindlin(sub)
+
+
+def _register_working_point(sub):
     p = sub.add_parser(
         "working-point",
         help="quasi-static working point vs Eq. 32 (infinite runner mass and friction)",
@@ -27,6 +34,8 @@ def register(sub):
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_working_point)
 
+
+def _register_simulate(sub):
     p = sub.add_parser(
         "simulate",
         help="square-wave excitation driving a runner of finite mass",
@@ -82,6 +91,8 @@ def register(sub):
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_simulate)
 
+
+def _register_mindlin(sub):
     p = sub.add_parser(
         "mindlin",
         help="Cattaneo-Mindlin tangential loading vs the analytic law",
@@ -90,13 +101,13 @@ def register(sub):
     )
     p.add_argument(
         "--mu",
-        type=finite_float("mu", 0, ex.MINDLIN_MU_MAX, lo_open=True),
+        type=finite_float("mu", 0, MINDLIN_MU_MAX, lo_open=True),
         required=True,
         help="friction coefficient",
     )
     p.add_argument(
         "--points",
-        type=positive_int("points", 2, ex.MINDLIN_POINTS_MAX),
+        type=positive_int("points", 2, MINDLIN_POINTS_MAX),
         default=21,
         help="tangential displacements compared, up to 1.2 u* (full sliding; default 21)",
     )
@@ -186,7 +197,7 @@ def _simulate(args):
 
 
 def _mindlin(args):
-    r = ex.mindlin(args.mu, points=args.points, resolution=args.resolution)
+    r = mindlin(args.mu, points=args.points, resolution=args.resolution)
     err = max(abs(a - b) for a, b in zip(r["T_over_muN"], r["analytic"]))
     human = "\n".join(
         ["u/u*     T/(mu N) sim   analytic"]

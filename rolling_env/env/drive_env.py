@@ -13,7 +13,8 @@ from gymnasium import spaces
 from rolling_env.env import _envkernel as EK
 from rolling_env.env.scenes import EPISODE_STEPS_MAX, Scene, draw_physics, episode_scene, load_scene
 from rolling_env.physics import _kernel as K
-from rolling_env.physics.model import Drive, DriveParams, check_flags
+from rolling_env.physics.kernel_state import check_flags
+from rolling_env.physics.model import Drive, DriveParams
 
 OBS_NAMES = EK.OBS_NAMES  # the observation, in order (one list: the kernel writes it)
 OBS_BOUND = EK.OBS_BOUND

@@ -70,7 +70,7 @@ from rolling_env.env.threads import (
     thread_choices,
 )
 from rolling_env.physics import _kernel as K
-from rolling_env.physics.model import CellViews
+from rolling_env.physics.kernel_state import CellViews
 
 __all__ = [
     "BatchCore",

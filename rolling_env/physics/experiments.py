@@ -3,7 +3,6 @@
 * ``working_point``: quasi-static working point v*/(omega R) from the zero-impulse condition
   (Eq. 31), infinite friction and runner mass.
 * ``simulate``: the same square wave driving a runner of finite mass (and friction).
-* ``mindlin``: Cattaneo-Mindlin tangential loading of a pressed sphere.
 * ``force_sum`` / ``impulse``: the steady force sum and the period impulse (paper Figs. 6, 8).
 
 Dimensionless inputs follow the paper; the SI geometry only matters with finite friction
@@ -192,26 +191,7 @@ def working_point(
     periods = check_int("periods", periods, 2, STEADY_MAX_PERIODS)
     t0 = time.perf_counter()
     runs = [_impulse_run(delta, eps, w, V, resolution, geo, 1, 1, grid_offset) for V in (0.0, 0.1)]
-    i0, i1 = runs[0](periods), runs[1](periods)
-    sims = -0.1 * i0 / (i1 - i0)  # the working point of each period so far
-    k = periods
-    steady = abs(sims[-1] - sims[-2]) <= STEADY_TOL
-    chunk = 8
-    while until_steady and not steady and k < STEADY_MAX_PERIODS:
-        # further periods in growing chunks (one kernel call each), stopping at the first
-        # period whose working point repeats the one before
-        c = min(chunk, STEADY_MAX_PERIODS - k)
-        j0, j1 = runs[0](c), runs[1](c)
-        more = np.concatenate([sims[-1:], -0.1 * j0 / (j1 - j0)])
-        hit = np.flatnonzero(np.abs(np.diff(more)) <= STEADY_TOL)
-        if hit.size:
-            sims = np.concatenate([sims, more[1 : hit[0] + 2]])
-            k += hit[0] + 1
-            steady = True
-        else:
-            sims = np.concatenate([sims, more[1:]])
-            k += c
-        chunk = min(2 * chunk, 256)
+    sims, k, steady = _periods_until_steady(runs, periods, until_steady)
     sim, prev = float(sims[-1]), float(sims[-2])
     seconds = time.perf_counter() - t0
     eq32 = float(analytic.eq32(delta, eps, w)) if w >= 2 else None
@@ -235,24 +215,7 @@ def working_point(
             f"still changed by {abs(sim - prev):.1e} in it"
             + ("" if until_steady else " (until_steady=False)")
         )
-    gap = 1.0 - math.sqrt(delta)  # a1 - a2 in a1: the back-step contact edge
-    if 0.0 < gap < 2.0 / resolution:
-        need = math.ceil(8.0 / gap)
-        both = eq32 is not None and w - 2.0 < 2.0 / resolution
-        notes.append(
-            f"1 - sqrt(delta) = {gap:.3g} a1 spans {gap * resolution:.2g} cells: not "
-            "resolved, the relative error can reach "
-            + (
-                "several times Eq. 32 (w - 2 is below two cells too)"
-                if both
-                else "1% at 64 and 10% at 16 cells per a1"
-            )
-            + (
-                f"; about {need} cells per a1 resolve it"
-                if need <= 1e5
-                else "; it cannot be resolved within the largest resolution (1e5)"
-            )
-        )
+    notes += _resolution_notes(delta, w, resolution, eq32 is not None)
     if w < 2:
         notes.append("Eq. 32 holds for w >= 2 only: no eq32 value here")
         try:
@@ -263,6 +226,57 @@ def working_point(
     if notes:
         res["note"] = "; ".join(notes)
     return res
+
+
+def _periods_until_steady(runs, periods: int, until_steady: bool):
+    """The working point of each period so far of the two prescribed-runner ``runs`` (v* = 0
+    and 0.1 omega R), after ``periods`` periods and (``until_steady``) on until a period's
+    repeats the one before; returns them, the periods run and whether that was reached."""
+    i0, i1 = runs[0](periods), runs[1](periods)
+    sims = -0.1 * i0 / (i1 - i0)  # the working point of each period so far
+    k = periods
+    steady = abs(sims[-1] - sims[-2]) <= STEADY_TOL
+    chunk = 8
+    while until_steady and not steady and k < STEADY_MAX_PERIODS:
+        # further periods in growing chunks (one kernel call each), stopping at the first
+        # period whose working point repeats the one before
+        c = min(chunk, STEADY_MAX_PERIODS - k)
+        j0, j1 = runs[0](c), runs[1](c)
+        more = np.concatenate([sims[-1:], -0.1 * j0 / (j1 - j0)])
+        hit = np.flatnonzero(np.abs(np.diff(more)) <= STEADY_TOL)
+        if hit.size:
+            sims = np.concatenate([sims, more[1 : hit[0] + 2]])
+            k += hit[0] + 1
+            steady = True
+        else:
+            sims = np.concatenate([sims, more[1:]])
+            k += c
+        chunk = min(2 * chunk, 256)
+    return sims, k, steady
+
+
+def _resolution_notes(delta, w, resolution, has_eq32: bool) -> list:
+    """A note where the back-step contact edge, 1 - sqrt(delta) a1 from the forth step's,
+    spans under two cells (not resolved), else none."""
+    gap = 1.0 - math.sqrt(delta)  # a1 - a2 in a1: the back-step contact edge
+    if not 0.0 < gap < 2.0 / resolution:
+        return []
+    need = math.ceil(8.0 / gap)
+    both = has_eq32 and w - 2.0 < 2.0 / resolution
+    return [
+        f"1 - sqrt(delta) = {gap:.3g} a1 spans {gap * resolution:.2g} cells: not "
+        "resolved, the relative error can reach "
+        + (
+            "several times Eq. 32 (w - 2 is below two cells too)"
+            if both
+            else "1% at 64 and 10% at 16 cells per a1"
+        )
+        + (
+            f"; about {need} cells per a1 resolve it"
+            if need <= 1e5
+            else "; it cannot be resolved within the largest resolution (1e5)"
+        )
+    ]
 
 
 def force_sum(
@@ -387,16 +401,25 @@ def simulate(
         n_sub = check_n_sub(n_sub)  # int(n_sub) below truncated 2.5 to 2
     periods, ticks_per_half = _check_run_length(periods, ticks_per_half, lo=2)
     wave = SquareWave(delta, eps, w, geo.a1, geo.R, geo.tau, direction)
-    m = natural_frequency_mass(omega_n_ratio, wave, geo.G_star)
+    runner = dict(omega_n_ratio=omega_n_ratio, mu=mu, F_ext=F_ext, vstar0_ratio=vstar0_ratio)
+    return _free_runner(wave, geo, resolution, periods, ticks_per_half, n_sub, record, runner)
+
+
+def _free_runner(wave, geo, resolution, periods, ticks_per_half, n_sub, record, runner):
+    """``simulate`` on its checked arguments: the runner of ``runner`` (omega_n_ratio, mu,
+    F_ext, vstar0_ratio) driven by ``wave`` (``n_sub`` None: ``default_substeps``)."""
+    r, mu, F_ext = runner["omega_n_ratio"], runner["mu"], runner["F_ext"]
+    m = natural_frequency_mass(r, wave, geo.G_star)
     if math.isinf(m) and F_ext != 0.0:
         raise ValueError("F_ext needs a finite runner mass (omega_n_ratio > 0)")
     if n_sub is None:
-        n_sub = default_substeps(omega_n_ratio, wave, resolution, ticks_per_half, mu)
+        n_sub = default_substeps(r, wave, resolution, ticks_per_half, mu)
+    params = DriveParams(geo.R, geo.E_star, geo.G_star, mu=mu, m=m, F_ext=F_ext)
     d, u, v = wave.ticks(int(periods), ticks_per_half)
     dt_tick = wave.dt_tick(ticks_per_half)
-    params = DriveParams(geo.R, geo.E_star, geo.G_star, mu=mu, m=m, F_ext=F_ext)
+    direction, vstar0_ratio = wave.direction, runner["vstar0_ratio"]
 
-    def run(vstar_ratio=None):
+    def run(vstar_ratio=None):  # free, or held at v* = vstar_ratio omega R
         drv = _drive(wave, geo, params, resolution)
         drv.reset(vstar0=direction * vstar0_ratio * wave.omega_R)
         vs = (
@@ -406,12 +429,12 @@ def simulate(
 
     per = 2 * ticks_per_half
     t0 = time.perf_counter()
-    if math.isinf(m):
+    if math.isinf(m):  # infinitely heavy: the constant v* whose period impulse vanishes
 
         def last_impulse(V):
             return direction * run(V)[1]["impulse"][-per:].sum()
 
-        hi = abs(1 - eps) + 1.0
+        hi = abs(1 - wave.eps) + 1.0
         V = brentq(last_impulse, -hi, hi, xtol=1e-12 * hi, rtol=1e-12)
         drv, out = run(V)
     else:
@@ -430,13 +453,13 @@ def simulate(
             e["residual"] / max(e["work_in"], ENERGY_FLOOR * unit * int(periods))
         ),
         "seconds": seconds,
-        "eq32": float(analytic.eq32(delta, eps, w)) if w >= 2 else None,
+        "eq32": float(analytic.eq32(wave.delta, wave.eps, wave.w)) if wave.w >= 2 else None,
         "n_sub": int(n_sub),
         "resolution": resolution,
         "periods": int(periods),
-        "omega_n_ratio": omega_n_ratio,
+        "omega_n_ratio": r,
         "mu": mu,
-        **step_status(omega_n_ratio, wave, int(n_sub), ticks_per_half),
+        **step_status(r, wave, int(n_sub), ticks_per_half),
     }
     if record:
         res["trajectory"] = out
@@ -567,45 +590,3 @@ def step_status(omega_n_ratio, wave: SquareWave, n_sub, ticks_per_half=1) -> dic
             "the slip work within 3.2%)"
         )
     return dict(step_converged=False, runner_steps_per_period=have, step_note=note)
-
-
-MINDLIN_MU_MAX = 1e3  # beyond it the slip distance u* = 3 mu N / (16 G* a1) leaves any contact
-MINDLIN_POINTS_MAX = 10**5  # displacement points (ticks of one run)
-
-
-def mindlin(mu, *, points=21, resolution=DEFAULT_RESOLUTION, geo: Geometry = Geometry(), n_sub=20):
-    """Cattaneo-Mindlin: press with d1, then displace tangentially up to 1.2 u* (runner held).
-
-    Returns ``u_over_ustar``, ``T_over_muN`` (simulated) and ``analytic`` lists."""
-    check_range("mu", mu, 0.0, MINDLIN_MU_MAX, lo_open=True)
-    points = check_int("points", points, 2, MINDLIN_POINTS_MAX)
-    n_sub = check_n_sub(n_sub)
-    check_range("resolution", resolution, 2.0, 1e5)
-    a1 = geo.a1
-    d1 = a1**2 / geo.R
-    params = DriveParams(geo.R, geo.E_star, geo.G_star, mu=mu)
-    drv = Drive(params, a_ref=a1, resolution=resolution, stroke=(0.0, 0.0), a_max=a1, t_ref=geo.tau)
-    drv.reset()
-    ustar = analytic.mindlin_ustar(mu, d1, geo.E_star, geo.G_star)
-    N = analytic.hertz_force(d1, geo.R, geo.E_star)
-    u = np.linspace(0.0, 1.2 * ustar, points)
-    du = np.diff(u)
-    dt = geo.tau
-    # no rolling, runner held: creep rate -v = du/dt
-    out = drv.run(
-        dt_tick=dt,
-        n_sub=n_sub,
-        omega_R=np.zeros(du.size),
-        v=-du / dt,
-        d=np.full(du.size, d1),
-        vstar=np.zeros(du.size),
-    )
-    T = np.concatenate([[0.0], out["T"]])
-    ana = analytic.mindlin_force(u, mu, N, d1, geo.E_star, geo.G_star)
-    return {
-        "u_over_ustar": (u / ustar).tolist(),
-        "T_over_muN": (T / (mu * N)).tolist(),
-        "analytic": (np.asarray(ana) / (mu * N)).tolist(),
-        "mu": mu,
-        "resolution": resolution,
-    }

@@ -15,36 +15,10 @@ import numpy as np
 
 from rolling_env.physics import _kernel as K
 from rolling_env.physics.analytic import hertz_force, hertz_indentation
+from rolling_env.physics.kernel_state import CellViews, check_flags
 from rolling_env.validation import as_real_array, check_int, check_range
 
 _INF = math.inf
-
-
-SLIDE_MESSAGE = (
-    "the massless runner (m = 0) has no force equilibrium: |F_ext| exceeds the "
-    "largest force the contact holds (mu N with finite friction, 0 without contact)"
-    "; the runner would accelerate without bound.  Give it a finite mass m > 0, or "
-    "keep |F_ext| below mu N with the contact closed"
-)
-
-
-def check_flags(st) -> None:
-    """Raise for the kernel's error flags in a state vector or a batch of them (rows):
-    the grid flag (RuntimeError), a massless runner without force equilibrium (ValueError,
-    ``SLIDE_MESSAGE``) and a non-finite value (FloatingPointError)."""
-    flags = np.bitwise_or.reduce(np.atleast_2d(st)[:, K.ST_FLAG].astype(np.int64))
-    if flags & K.FLAG_SLIDE:
-        raise ValueError(SLIDE_MESSAGE)
-    if flags & K.FLAG_GRID:
-        raise RuntimeError(
-            "the contact left the spring row: the rolling stroke exceeded the "
-            "grid built for it (enlarge `stroke`)"
-        )
-    if flags & K.FLAG_NONFINITE:
-        raise FloatingPointError(
-            "the kernel produced a non-finite value (it overflowed the "
-            "float range: reduce dt_tick, the rates or the load)"
-        )
 
 
 @dataclass(frozen=True)
@@ -115,29 +89,6 @@ class Grid:
         self.n = int(math.ceil(width / self.dx))
         self.n += 1 if self.offset else 0
         self.x_lo = 0.5 * (self.c_min + self.c_max) - 0.5 * self.n * self.dx + self.offset * self.dx
-
-
-class CellViews:
-    """Named read-only views of the cell work array ``self.cells`` (rows ``K.W_*`` on the
-    second-to-last axis, so one drive's (rows, n) and a batch's (envs, rows, n) alike)."""
-
-    @property
-    def U(self) -> np.ndarray:
-        """Tangential content of each cell (G* = 1 units)."""
-        return self.cells[..., K.W_U, :]
-
-    @property
-    def A(self) -> np.ndarray:
-        return self.cells[..., K.W_A, :]
-
-    @property
-    def B(self) -> np.ndarray:
-        return self.cells[..., K.W_B, :]
-
-    @property
-    def L(self) -> np.ndarray:
-        """Friction work rows (``K.L_*``); none (0 rows) with infinite friction."""
-        return self.cells[..., K.W_L :, :]
 
 
 class Drive(CellViews):
@@ -377,38 +328,8 @@ class Drive(CellViews):
         check_range("dt_tick", dt_tick, 0.0, _INF, lo_open=True, hi_open=True)
         n_sub = check_n_sub(n_sub)
         self._check_state_valid()
-        u = _as_ticks("omega_R", omega_R)
+        u, vv, dd, vs = self._tick_inputs(omega_R, v, N, d, vstar)
         k = u.shape[0]
-        vv = _as_ticks("v", v, k)
-        if (N is None) == (d is None):
-            raise ValueError("give exactly one of N (normal force) or d (indentation)")
-        if N is not None:
-            NN = _as_ticks("N", N, k)
-            if np.any(NN < 0):
-                raise ValueError("N must be >= 0 (no adhesion)")
-            dd = hertz_indentation(NN, self.params.R, self.params.E_star)
-        else:
-            dd = _as_ticks("d", d, k)
-            if np.any(dd < 0):
-                raise ValueError("d must be >= 0 (no adhesion)")
-        if self._mass is None:
-            if vstar is None:
-                raise ValueError("vstar is required for a prescribed runner (m = inf)")
-            vs = _as_ticks("vstar", vstar, k)
-        else:
-            if vstar is not None:
-                raise ValueError(
-                    f"vstar is only for a prescribed runner (m = inf); this runner "
-                    f"is free (m = {self.params.m:g} kg) and its velocity follows "
-                    "from the runner equation: leave vstar out"
-                )
-            vs = np.zeros(k)
-        a_max = float(np.sqrt(self.params.R * dd.max())) / self.L0 if k else 0.0
-        if a_max > self.grid.a_max * (1 + 1e-9):
-            raise ValueError(
-                f"contact half-width {a_max * self.L0:.3e} m exceeds the grid's "
-                f"a_max {self.grid.a_max * self.L0:.3e} m"
-            )
         ts = self.t0 / self.L0
         out = np.zeros((k, K.N_OUT))
         # a massless loaded runner can meet a tick without force equilibrium: the error then
@@ -447,6 +368,44 @@ class Drive(CellViews):
         res = self._to_si(out[:done])
         self._check_finite(out[:done], res, dt_tick)
         return res
+
+    def _tick_inputs(self, omega_R, v, N, d, vstar):
+        """``run``'s per-tick inputs checked, as arrays of one length: omega R, v, the
+        indentation (from N where N is given) and vstar (zeros for a free runner); the
+        contact must stay within the grid's a_max."""
+        u = _as_ticks("omega_R", omega_R)
+        k = u.shape[0]
+        vv = _as_ticks("v", v, k)
+        if (N is None) == (d is None):
+            raise ValueError("give exactly one of N (normal force) or d (indentation)")
+        if N is not None:
+            NN = _as_ticks("N", N, k)
+            if np.any(NN < 0):
+                raise ValueError("N must be >= 0 (no adhesion)")
+            dd = hertz_indentation(NN, self.params.R, self.params.E_star)
+        else:
+            dd = _as_ticks("d", d, k)
+            if np.any(dd < 0):
+                raise ValueError("d must be >= 0 (no adhesion)")
+        if self._mass is None:
+            if vstar is None:
+                raise ValueError("vstar is required for a prescribed runner (m = inf)")
+            vs = _as_ticks("vstar", vstar, k)
+        else:
+            if vstar is not None:
+                raise ValueError(
+                    f"vstar is only for a prescribed runner (m = inf); this runner "
+                    f"is free (m = {self.params.m:g} kg) and its velocity follows "
+                    "from the runner equation: leave vstar out"
+                )
+            vs = np.zeros(k)
+        a_max = float(np.sqrt(self.params.R * dd.max())) / self.L0 if k else 0.0
+        if a_max > self.grid.a_max * (1 + 1e-9):
+            raise ValueError(
+                f"contact half-width {a_max * self.L0:.3e} m exceeds the grid's "
+                f"a_max {self.grid.a_max * self.L0:.3e} m"
+            )
+        return u, vv, dd, vs
 
     def _check_flags(self, hint="the drive's state is no longer valid (reset() it)"):
         """``check_flags`` of the state; a grid or non-finite error (an invalid state) gets

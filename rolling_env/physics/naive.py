@@ -33,7 +33,165 @@ def _bisect(residual, lo, hi):
     return 0.5 * (lo + hi)
 
 
-def naive_run(  # noqa: C901 (the reference is deliberately one plain loop)
+_KEYS = (
+    "T",
+    "impulse",
+    "N",
+    "vstar",
+    "xstar",
+    "c",
+    "slip_work",
+    "release_work",
+    "elastic",
+    "drive_work",
+    "runner_work",
+)
+
+
+def _per_tick(d, omegaR, v, vstar, F_ext):
+    """The per-tick inputs as float64 arrays, F_ext broadcast from a scalar; each must be
+    1-D, one value per tick, without NaN."""
+    ticks = {
+        name: np.atleast_1d(np.asarray(a, dtype=np.float64))
+        for name, a in dict(d=d, omegaR=omegaR, v=v, vstar=vstar).items()
+    }
+    n_t = ticks["d"].size
+    ticks["F_ext"] = (
+        np.broadcast_to(np.asarray(F_ext, dtype=np.float64), (n_t,))
+        if np.ndim(F_ext) == 0
+        else np.asarray(F_ext, dtype=np.float64)
+    )
+    for name, a in ticks.items():
+        if a.ndim != 1 or a.size != n_t:
+            raise ValueError(
+                f"{name} must be 1-D with one value per tick: shape {a.shape}, "
+                f"but d has {n_t} ticks"
+            )
+        if np.isnan(a).any():
+            raise ValueError(f"{name} contains NaN")
+    return ticks
+
+
+def _checked_inputs(p, n_sub, d, omegaR, v, vstar, F_ext):
+    """The per-tick inputs (_per_tick), after raising ValueError on a NaN or on a parameter
+    out of its range (p: the scalar parameters by name)."""
+    for name, val in p.items():
+        if np.isnan(val):
+            raise ValueError(f"{name} is NaN")
+    ticks = _per_tick(d, omegaR, v, vstar, F_ext)
+    if not p["dx"] > 0:
+        raise ValueError(f"dx must be > 0, got {p['dx']}")
+    if int(n_sub) != n_sub or n_sub < 1:
+        raise ValueError(f"n_sub must be an integer >= 1, got {n_sub}")
+    if not p["x_hi"] > p["x_lo"]:
+        raise ValueError(f"x_hi must exceed x_lo, got [{p['x_lo']}, {p['x_hi']}]")
+    for name in ("R", "E_star", "G_star", "dt_tick"):
+        if not 0 < p[name] < np.inf:
+            raise ValueError(f"{name} must be finite and > 0, got {p[name]}")
+    if p["mu"] < 0:
+        raise ValueError(f"mu must be >= 0, got {p['mu']}")
+    m = p["m"]
+    if m < 0:
+        raise ValueError(f"m must be >= 0, got {m}")
+    if m == 0 and np.any(ticks["F_ext"] != 0):
+        raise ValueError("F_ext must be 0 when m == 0 (a massless runner cannot carry a load)")
+    if m == np.inf and not np.isfinite(ticks["vstar"]).all():
+        raise ValueError("vstar must be finite when m is inf (prescribed)")
+    return ticks
+
+
+class _SpringRow:
+    """The row's state between sub-steps (tangential deflections, patch centre, runner) and
+    the works accumulated so far."""
+
+    def __init__(self, *, R, E_star, G_star, mu, m, x_lo, x_hi, dx, dt, c0, vstar0):
+        self.x = _row(x_lo, x_hi, dx)
+        self.R, self.E_star, self.G_star, self.mu, self.m, self.dt = R, E_star, G_star, mu, m, dt
+        self.kN, self.kT = E_star * dx, G_star * dx
+        self.uT = np.zeros_like(self.x)
+        self.c, self.vs, self.xs = float(c0), float(vstar0), 0.0
+        self.slip_w = self.release_w = self.drive_w = self.runner_w = 0.0
+
+    def substep(self, d_k, wR, v_k, F_k, vstar_k):
+        """Advance one sub-step; returns the tangential force T after it, its mean over the
+        sub-step, and the contact mask and normal deflections uN it ran with."""
+        dt, kT, mu = self.dt, self.kT, self.mu
+        # 1. roll the profile over the springs
+        self.c += wR * dt
+        uN = d_k - (self.x - self.c) ** 2 / self.R
+        contact = uN > 0.0
+        # 2. release springs that left contact: their elastic energy is dissipated
+        gone = ~contact
+        self.release_w += 0.5 * kT * np.sum(self.uT[gone] ** 2)
+        self.uT[gone] = 0.0
+        T_old = kT * np.sum(self.uT)  # the force at the start of the sub-step
+        # 3. trial deflection as a function of the new runner velocity, then Coulomb
+        lim = np.where(contact, mu * (self.E_star / self.G_star) * uN, 0.0) if mu < np.inf else None
+
+        # the runner's displacement over the sub-step: the trapezoid of its velocities
+        # for a free runner (implicit trapezoid rule, second order), its new velocity
+        # for a prescribed or massless one
+        vs_old = self.vs if 0 < self.m < np.inf else None
+        uT = self.uT
+
+        def mean_v(vs_new):
+            return vs_new if vs_old is None else 0.5 * (vs_old + vs_new)
+
+        def trial(vs_new):
+            u_tr = np.where(contact, uT + (wR - v_k - mean_v(vs_new)) * dt, 0.0)
+            u_cl = u_tr if lim is None else np.clip(u_tr, -lim, lim)
+            return u_tr, u_cl, kT * np.sum(u_cl)
+
+        vs_new = self._new_velocity(trial, contact, uN, lim, T_old, wR - v_k, F_k, vstar_k)
+        # 4. commit
+        u_tr, u_cl, T = trial(vs_new)
+        if lim is not None:
+            self.slip_w += np.sum(mu * self.kN * np.where(contact, uN, 0.0) * np.abs(u_tr - u_cl))
+        self.uT = u_cl
+        vm = mean_v(vs_new)
+        self.vs = float(vs_new)
+        self.xs += vm * dt
+        T_mean = T if vs_old is None else 0.5 * (T_old + T)
+        self.drive_w += T_mean * (wR - v_k) * dt
+        self.runner_w += T_mean * vm * dt
+        return T, T_mean, contact, uN
+
+    def _new_velocity(self, trial, contact, uN, lim, T_old, slide, F_k, vstar_k):
+        """The runner's velocity at the end of the sub-step: prescribed, or the one that
+        balances its momentum (m > 0) or its force (massless) against T(vs_new) = trial's.
+        slide: omegaR - v over the sub-step."""
+        m, vs, dt, kT = self.m, self.vs, self.dt, self.kT
+        n_c = int(contact.sum())
+        if m == np.inf:  # prescribed runner
+            return vstar_k
+        if lim is None:  # T affine: T0 - K dt vs_new
+            T0 = kT * np.sum(np.where(contact, self.uT + slide * dt, 0.0))
+            K = kT * n_c
+            if m > 0:  # m (v1 - v0) = dt/2 (T_old + T1) + dt F, T1 = T0 - K dt (v0 + v1)/2
+                a_ = 0.5 * K * dt * dt
+                return (m * vs + 0.5 * dt * (T_old + T0 - 0.5 * K * dt * vs) + dt * F_k) / (
+                    m + 0.5 * a_
+                )
+            return T0 / (K * dt) if n_c > 0 else 0.0
+        if m > 0:  # dynamics, finite friction
+            T_max = np.sum(self.mu * self.kN * np.where(contact, uN, 0.0))
+            return _bisect(
+                lambda s: m * (s - vs) - 0.5 * dt * (T_old + trial(s)[2]) - dt * F_k,
+                vs + dt * (F_k - T_max) / m,
+                vs + dt * (F_k + T_max) / m,
+            )
+        if n_c == 0:  # massless, nothing to hold it
+            return 0.0
+        # massless: T(vs_new) = 0
+        base = slide + self.uT[contact] / dt
+        return _bisect(
+            lambda s: -trial(s)[2],
+            np.min(base - lim[contact] / dt),  # all saturated at +lim
+            np.max(base + lim[contact] / dt),  # all saturated at -lim
+        )
+
+
+def naive_run(
     *,
     R,
     E_star,
@@ -69,8 +227,7 @@ def naive_run(  # noqa: C901 (the reference is deliberately one plain loop)
       'drive_work' cumulative integral of T*(omegaR - v) dt [J]
       'runner_work' cumulative integral of T*vstar dt [J]
     and 'uT' final array, 'x' spring positions."""
-    # ---- input validation ------------------------------------------------------------
-    scalars = dict(
+    params = dict(
         R=R,
         E_star=E_star,
         G_star=G_star,
@@ -83,146 +240,24 @@ def naive_run(  # noqa: C901 (the reference is deliberately one plain loop)
         c0=c0,
         vstar0=vstar0,
     )
-    for name, val in scalars.items():
-        if np.isnan(val):
-            raise ValueError(f"{name} is NaN")
-    ticks = {
-        name: np.atleast_1d(np.asarray(a, dtype=np.float64))
-        for name, a in dict(d=d, omegaR=omegaR, v=v, vstar=vstar).items()
-    }
+    ticks = _checked_inputs(params, n_sub, d, omegaR, v, vstar, F_ext)
+
+    row = _SpringRow(dt=dt_tick / n_sub, **{k: p for k, p in params.items() if k != "dt_tick"})
     n_t = ticks["d"].size
-    F = (
-        np.broadcast_to(np.asarray(F_ext, dtype=np.float64), (n_t,))
-        if np.ndim(F_ext) == 0
-        else np.asarray(F_ext, dtype=np.float64)
-    )
-    ticks["F_ext"] = F
-    for name, a in ticks.items():
-        if a.ndim != 1 or a.size != n_t:
-            raise ValueError(
-                f"{name} must be 1-D with one value per tick: shape {a.shape}, "
-                f"but d has {n_t} ticks"
-            )
-        if np.isnan(a).any():
-            raise ValueError(f"{name} contains NaN")
-    if not dx > 0:
-        raise ValueError(f"dx must be > 0, got {dx}")
-    if int(n_sub) != n_sub or n_sub < 1:
-        raise ValueError(f"n_sub must be an integer >= 1, got {n_sub}")
-    if not x_hi > x_lo:
-        raise ValueError(f"x_hi must exceed x_lo, got [{x_lo}, {x_hi}]")
-    for name, val in dict(R=R, E_star=E_star, G_star=G_star, dt_tick=dt_tick).items():
-        if not 0 < val < np.inf:
-            raise ValueError(f"{name} must be finite and > 0, got {val}")
-    if mu < 0:
-        raise ValueError(f"mu must be >= 0, got {mu}")
-    if m < 0:
-        raise ValueError(f"m must be >= 0, got {m}")
-    if m == 0 and np.any(F != 0):
-        raise ValueError("F_ext must be 0 when m == 0 (a massless runner cannot carry a load)")
-    if m == np.inf and not np.isfinite(ticks["vstar"]).all():
-        raise ValueError("vstar must be finite when m is inf (prescribed)")
-
-    # ---- state ----------------------------------------------------------------------
-    x = _row(x_lo, x_hi, dx)
-    kN, kT = E_star * dx, G_star * dx
-    dt = dt_tick / n_sub
-    uT = np.zeros_like(x)
-    c, vs, xs = float(c0), float(vstar0), 0.0
-    slip_w = release_w = drive_w = runner_w = 0.0
-    keys = (
-        "T",
-        "impulse",
-        "N",
-        "vstar",
-        "xstar",
-        "c",
-        "slip_work",
-        "release_work",
-        "elastic",
-        "drive_work",
-        "runner_work",
-    )
-    out = {k: np.zeros(n_t) for k in keys}
-
+    out = {k: np.zeros(n_t) for k in _KEYS}
     for k in range(n_t):
-        d_k, wR, v_k, F_k = ticks["d"][k], ticks["omegaR"][k], ticks["v"][k], F[k]
+        d_k, wR, v_k = ticks["d"][k], ticks["omegaR"][k], ticks["v"][k]
         impulse = 0.0
         for _ in range(int(n_sub)):
-            # 1. roll the profile over the springs
-            c += wR * dt
-            uN = d_k - (x - c) ** 2 / R
-            contact = uN > 0.0
-            # 2. release springs that left contact: their elastic energy is dissipated
-            gone = ~contact
-            release_w += 0.5 * kT * np.sum(uT[gone] ** 2)
-            uT[gone] = 0.0
-            T_old = kT * np.sum(uT)  # the force at the start of the sub-step
-            # 3. trial deflection as a function of the new runner velocity, then Coulomb
-            lim = np.where(contact, mu * (E_star / G_star) * uN, 0.0) if mu < np.inf else None
-
-            # the runner's displacement over the sub-step: the trapezoid of its velocities
-            # for a free runner (implicit trapezoid rule, second order), its new velocity
-            # for a prescribed or massless one
-            vs_old = vs if 0 < m < np.inf else None
-
-            def mean_v(vs_new):
-                return vs_new if vs_old is None else 0.5 * (vs_old + vs_new)
-
-            def trial(vs_new):
-                u_tr = np.where(contact, uT + (wR - v_k - mean_v(vs_new)) * dt, 0.0)
-                u_cl = u_tr if lim is None else np.clip(u_tr, -lim, lim)
-                return u_tr, u_cl, kT * np.sum(u_cl)
-
-            n_c = int(contact.sum())
-            if m == np.inf:  # prescribed runner
-                vs_new = ticks["vstar"][k]
-            elif lim is None:  # T affine: T0 - K dt vs_new
-                T0 = kT * np.sum(np.where(contact, uT + (wR - v_k) * dt, 0.0))
-                K = kT * n_c
-                if m > 0:  # m (v1 - v0) = dt/2 (T_old + T1) + dt F, T1 = T0 - K dt (v0 + v1)/2
-                    a_ = 0.5 * K * dt * dt
-                    vs_new = (m * vs + 0.5 * dt * (T_old + T0 - 0.5 * K * dt * vs) + dt * F_k) / (
-                        m + 0.5 * a_
-                    )
-                else:
-                    vs_new = T0 / (K * dt) if n_c > 0 else 0.0
-            elif m > 0:  # dynamics, finite friction
-                T_max = np.sum(mu * kN * np.where(contact, uN, 0.0))
-                vs_new = _bisect(
-                    lambda s: m * (s - vs) - 0.5 * dt * (T_old + trial(s)[2]) - dt * F_k,
-                    vs + dt * (F_k - T_max) / m,
-                    vs + dt * (F_k + T_max) / m,
-                )
-            elif n_c == 0:  # massless, nothing to hold it
-                vs_new = 0.0
-            else:  # massless: T(vs_new) = 0
-                base = wR - v_k + uT[contact] / dt
-                vs_new = _bisect(
-                    lambda s: -trial(s)[2],
-                    np.min(base - lim[contact] / dt),  # all saturated at +lim
-                    np.max(base + lim[contact] / dt),
-                )  # all saturated at -lim
-            # 4. commit
-            u_tr, u_cl, T = trial(vs_new)
-            if lim is not None:
-                slip_w += np.sum(mu * kN * np.where(contact, uN, 0.0) * np.abs(u_tr - u_cl))
-            uT = u_cl
-            vm = mean_v(vs_new)
-            vs = float(vs_new)
-            xs += vm * dt
-            T_mean = T if vs_old is None else 0.5 * (T_old + T)
-            impulse += T_mean * dt
-            drive_w += T_mean * (wR - v_k) * dt
-            runner_w += T_mean * vm * dt
-            T_old = T
+            T, T_mean, contact, uN = row.substep(d_k, wR, v_k, ticks["F_ext"][k], ticks["vstar"][k])
+            impulse += T_mean * row.dt
         out["T"][k], out["impulse"][k] = T, impulse
-        out["N"][k] = kN * np.sum(np.where(contact, uN, 0.0))
-        out["vstar"][k], out["xstar"][k], out["c"][k] = vs, xs, c
-        out["slip_work"][k], out["release_work"][k] = slip_w, release_w
-        out["elastic"][k] = 0.5 * kT * np.sum(uT**2)
-        out["drive_work"][k], out["runner_work"][k] = drive_w, runner_w
-    out["uT"], out["x"] = uT, x
+        out["N"][k] = row.kN * np.sum(np.where(contact, uN, 0.0))
+        out["vstar"][k], out["xstar"][k], out["c"][k] = row.vs, row.xs, row.c
+        out["slip_work"][k], out["release_work"][k] = row.slip_w, row.release_w
+        out["elastic"][k] = 0.5 * row.kT * np.sum(row.uT**2)
+        out["drive_work"][k], out["runner_work"][k] = row.drive_w, row.runner_w
+    out["uT"], out["x"] = row.uT, row.x
     return out
 
 

@@ -47,6 +47,7 @@ import numpy as np
 from rolling_env.io import atomic_write, staged, write_text
 from rolling_env.physics import analytic
 from rolling_env.physics import experiments as ex
+from rolling_env.physics.mindlin import mindlin
 
 WP_CASES = [(0.93, 0.2, 2.2), (0.7, 0.1, 2.5), (0.5, 0.3, 5.0)]
 NAIVE_CASE = WP_CASES[1]
@@ -286,7 +287,7 @@ def study(quick=False, repeats=3, env_scenes=None) -> list[dict]:
         r, sec = _best_time(lambda: _dyn_run(dt_res, n_sub, periods), 1)
         rows += _dyn_rows("dt", n_sub, r, ref, sec)
     for res in [8, 16, 32, 64] if quick else [8, 16, 32, 64, 128, 256]:
-        r, sec = _best_time(lambda: ex.mindlin(0.3, points=41, resolution=res), repeats)
+        r, sec = _best_time(lambda: mindlin(0.3, points=41, resolution=res), repeats)
         err = float(np.max(np.abs(np.array(r["T_over_muN"]) - np.array(r["analytic"]))))
         rows.append(
             dict(quantity="mindlin", refine="resolution", value=res, error=err, seconds=sec)

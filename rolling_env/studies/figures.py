@@ -95,7 +95,6 @@ def make_figures(out="results/paper", n=41, resolution=32, resolution9=64) -> di
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     out = Path(out)
     delta, w = FIG_DELTA, FIG_W
@@ -104,60 +103,67 @@ def make_figures(out="results/paper", n=41, resolution=32, resolution9=64) -> di
     e32 = analytic.eq32(delta, eps, w)
     dev6 = float(np.max(np.abs(zero_fs - e29)))
     dev8 = float(np.max(np.abs(zero_imp - e32)))
+    title = rf"$\delta$ = {delta}, $w$ = {w}, {resolution:g} springs per $a_1$"
+    refs6 = [("Eq. 29 (steady rolling)", e29, "k--")]
+    refs8 = [("Eq. 32 (with transition)", e32, "k--"), ("Eq. 29", e29, "k:")]
+    _write_map(out, "fig6_force_sum", rf"Fig. 6: {title}", eps, V, fs, zero_fs, refs6, e29, e32)
+    _write_map(out, "fig8_impulse", rf"Fig. 8: {title}", eps, V, imp, zero_imp, refs8, e29, e32)
+    dev9 = _write_fig9(out, resolution9)
+    return {
+        "fig6_max_dev_from_eq29": dev6,
+        "fig8_max_dev_from_eq32": dev8,
+        "fig9_max_dev_from_eq32": dev9,
+        "out": str(out),
+    }
 
-    for name, fig_no, Z, label, zero, refs in (
-        (
-            "fig6_force_sum",
-            6,
-            fs,
-            r"force sum $(T_1+T_2)/(2G^*a_1^2)$",
-            zero_fs,
-            [("Eq. 29 (steady rolling)", e29, "k--")],
-        ),
-        (
-            "fig8_impulse",
-            8,
-            imp,
-            r"period impulse $I/(2G^*a_1^2\tau)$",
-            zero_imp,
-            [("Eq. 32 (with transition)", e32, "k--"), ("Eq. 29", e29, "k:")],
-        ),
-    ):
-        fig, ax = plt.subplots(figsize=(6.4, 4.6))
-        lim = float(np.max(np.abs(Z)))
-        pc = ax.pcolormesh(eps, V, Z, cmap="RdBu_r", vmin=-lim, vmax=lim, shading="auto")
-        fig.colorbar(pc, ax=ax, label=label)
-        cs = ax.contour(eps, V, Z, levels=np.linspace(-lim, lim, 13), colors="0.35", linewidths=0.5)
-        ax.clabel(cs, fontsize=6, fmt="%.2f")
-        ax.plot(eps, zero, color="gold", lw=3, label="simulated zero")
-        for lab, y, style in refs:
-            ax.plot(eps, y, style, lw=1.2, label=lab)
-        ax.set_xlabel(r"$v/(\omega R)$ (translation / rolling rate)")
-        ax.set_ylabel(r"$v^*/(\omega R)$ (runner velocity)")
-        ax.set_xlim(0.0, EPS_MAX)
-        ax.set_ylim(0.0, VSTAR_MAX)
-        ax.set_title(
-            rf"Fig. {fig_no}: $\delta$ = {delta}, $w$ = {w}, "
-            f"{resolution:g} springs per $a_1$",
-            fontsize=10,
-        )
-        ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
-        fig.tight_layout()
-        atomic_write(out / f"{name}.png", lambda p: fig.savefig(p, dpi=110, format="png"))
-        plt.close(fig)
-        rows = [(e, v, Z[j, i]) for j, v in enumerate(V) for i, e in enumerate(eps)]
-        write_text(
-            out / f"{name}.csv", _csv_text(["v_over_omegaR", "vstar_over_omegaR", "value"], rows)
-        )
-        write_text(
-            out / f"{name}_zero.csv",
-            _csv_text(
-                ["v_over_omegaR", "simulated_zero", "eq29", "eq32"],
-                [(e, z, a, b) for e, z, a, b in zip(eps, zero, e29, e32)],
-            ),
-        )
 
-    # Fig. 9
+_MAP_LABELS = {
+    "fig6_force_sum": r"force sum $(T_1+T_2)/(2G^*a_1^2)$",
+    "fig8_impulse": r"period impulse $I/(2G^*a_1^2\tau)$",
+}
+
+
+def _write_map(out: Path, name, title, eps, V, Z, zero, refs, e29, eq32) -> None:
+    """One map (Z[V, eps]) as ``name``.png with its simulated zero line and the reference
+    lines ``refs`` ((label, values, style)), ``name``.csv and the zero line ``name``_zero.csv."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.6))
+    lim = float(np.max(np.abs(Z)))
+    pc = ax.pcolormesh(eps, V, Z, cmap="RdBu_r", vmin=-lim, vmax=lim, shading="auto")
+    fig.colorbar(pc, ax=ax, label=_MAP_LABELS[name])
+    cs = ax.contour(eps, V, Z, levels=np.linspace(-lim, lim, 13), colors="0.35", linewidths=0.5)
+    ax.clabel(cs, fontsize=6, fmt="%.2f")
+    ax.plot(eps, zero, color="gold", lw=3, label="simulated zero")
+    for lab, y, style in refs:
+        ax.plot(eps, y, style, lw=1.2, label=lab)
+    ax.set_xlabel(r"$v/(\omega R)$ (translation / rolling rate)")
+    ax.set_ylabel(r"$v^*/(\omega R)$ (runner velocity)")
+    ax.set_xlim(0.0, EPS_MAX)
+    ax.set_ylim(0.0, VSTAR_MAX)
+    ax.set_title(title, fontsize=10)
+    ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
+    fig.tight_layout()
+    atomic_write(out / f"{name}.png", lambda p: fig.savefig(p, dpi=110, format="png"))
+    plt.close(fig)
+    rows = [(e, v, Z[j, i]) for j, v in enumerate(V) for i, e in enumerate(eps)]
+    write_text(
+        out / f"{name}.csv", _csv_text(["v_over_omegaR", "vstar_over_omegaR", "value"], rows)
+    )
+    write_text(
+        out / f"{name}_zero.csv",
+        _csv_text(
+            ["v_over_omegaR", "simulated_zero", "eq29", "eq32"],
+            [(e, z, a, b) for e, z, a, b in zip(eps, zero, e29, eq32)],
+        ),
+    )
+
+
+def _write_fig9(out: Path, resolution9) -> float:
+    """Fig. 9 (.png, .csv): Eq. 32 against simulated working points; returns the largest
+    deviation of a simulated point from Eq. 32 (in omega R)."""
+    import matplotlib.pyplot as plt
+
     e_line = np.linspace(0.0, 1.0, 101)
     e_mark = np.linspace(0.0, 0.9, 7)
     rows9 = fig9_points(e_mark, resolution9)
@@ -194,9 +200,4 @@ def make_figures(out="results/paper", n=41, resolution=32, resolution9=64) -> di
         out / "fig9_working_point.csv",
         _csv_text(["delta", "w", "v_over_omegaR", "simulated", "eq32"], rows9),
     )
-    return {
-        "fig6_max_dev_from_eq29": dev6,
-        "fig8_max_dev_from_eq32": dev8,
-        "fig9_max_dev_from_eq32": dev9,
-        "out": str(out),
-    }
+    return dev9

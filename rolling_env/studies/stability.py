@@ -72,6 +72,16 @@ from rolling_env.studies.stability_env import (
 # ----------------------------------------------------------------------------- the grid
 def cases(quick=False):
     """(name, callable) pairs; ``quick``: the fastest subset (used by the tests)."""
+    return (
+        _runner_cases(quick)
+        + _geometry_cases()
+        + _extreme_cases(quick)
+        + _env_cases([1.0, 100.0, 1e3, 1e4, math.inf] if quick else list(ENV_RATIOS), quick)
+    )
+
+
+def _runner_cases(quick):
+    """Free runners over the runner mass and the friction coefficient."""
     d, w, r = BASE["delta"], BASE["w"], BASE["r"]
     c = []
     rs = (
@@ -94,6 +104,13 @@ def cases(quick=False):
                 _sim(d, EPS_STICK, w, r, mu=1e-4),
             )
         )
+    return c
+
+
+def _geometry_cases():
+    """The limits of delta and w, below w = 2 and below w = 2 sqrt(delta)."""
+    w, r = BASE["w"], BASE["r"]
+    c = []
     for dl in (1e-4, 1.0):
         c.append(
             (
@@ -116,28 +133,28 @@ def cases(quick=False):
         )
     )
     c.append(("w = 0.5, delta = 0.5 (w < 2 sqrt(delta))", _no_steady_state(0.5, EPS_STICK, 0.5, r)))
-    c.append(
-        ("lift-off mid-step (N = 0 for one tick), mu = 0.3, free runner", _liftoff_case(0.3, r))
-    )
-    c.append(
+    return c
+
+
+def _extreme_cases(quick):
+    """Lift-off mid-step, maximal rates, a long run and the sweep of sub-steps."""
+    r = BASE["r"]
+    c = [
+        ("lift-off mid-step (N = 0 for one tick), mu = 0.3, free runner", _liftoff_case(0.3, r)),
         (
             "lift-off mid-step (N = 0 for one tick), mu = inf, prescribed runner",
             _liftoff_case(math.inf, 0.0),
-        )
-    )
-    c.append(("maximal rates: 100 and 6400 cells per sub-step, working point", _max_rates_wp()))
-    c.append(
+        ),
+        ("maximal rates: 100 and 6400 cells per sub-step, working point", _max_rates_wp()),
         (
             "maximal rates: 100 cells per sub-step, free runner, mu = inf",
             _max_rates_free(math.inf, r, ledger=True),
-        )
-    )
-    c.append(
+        ),
         (
             "maximal rates: 100 cells per sub-step, free runner, mu = 0.3",
             _max_rates_free(0.3, r, ledger=False),
-        )
-    )
+        ),
+    ]
     if not quick:
         c.append(
             (
@@ -157,8 +174,14 @@ def cases(quick=False):
             _substep_case((1, 10, 100, 1000) if quick else (1, 10, 100, 1000, 10000)),
         )
     )
+    return c
+
+
+def _env_cases(env_rs, quick):
+    """The default scene's runner at env settings over omega_n/Omega ``env_rs``, and its
+    continuity towards the massless runner; one sweep shared by all of them."""
     sweep = _EnvSweep()
-    env_rs = [1.0, 100.0, 1e3, 1e4, math.inf] if quick else list(ENV_RATIOS)
+    c = []
     for rr in env_rs:
         name = "massless" if math.isinf(rr) else f"omega_n/Omega = {rr:g}"
         c.append(

@@ -52,75 +52,11 @@ def _sim(delta, eps, w, r, mu=math.inf, periods=20, quasi_static=False, note="")
         res4 = ex.simulate(delta, eps, w, r, mu=mu, periods=periods, n_sub=4 * res["n_sub"])
         v4 = res4["mean_v_star_over_omega_R"]
         step, conv = _step_check(v, v4)
-        ref, ref_name = _eq_ref(delta, eps, w)
-        parts = [f"v*/(omega R) {v:.4g}"]
-        if ref is not None:
-            parts[0] += f" ({ref_name} {ref:.4g})"
-        half = tr["stick_fraction"][tr["stick_fraction"].size // 2 :]
-        if math.isfinite(mu):
-            parts.append(
-                f"slip work {res['slip_work']:.3g} per period, stuck fraction {half.mean():.2f}"
-            )
-        if quasi_static:
-            wp = ex.working_point(delta, eps, w)
-            parts.append(f"quasi-static working point {wp['simulated']:.5g}")
-        steady, v3, v4q = _steady(res, periods)
-        if not steady:
-            parts.append(
-                f"NOT at steady state: mean v* over the 3rd / 4th quarter of the run "
-                f"{v3:.3g} / {v4q:.3g}"
-                + (
-                    " (heavy runner: relaxation time ~ 1/r^2 periods >> run)"
-                    if 0 < r <= 0.01
-                    else " (contact sliding: the runner is dragged by friction)"
-                    if math.isfinite(mu) and half.mean() < 0.05
-                    else ""
-                )
-            )
-        if math.isinf(r):
-            parts.append("massless runner: force equilibrium, follows the sphere, no net motion")
-        elif not res["step_converged"]:
-            nrp = res["runner_steps_per_period"]
-            if r > ex.RUNNER_CAPPED_MAX:
-                parts.append(
-                    f"runner period not resolved ({nrp:.2g} sub-steps per runner "
-                    f"period; the default resolves omega_n/Omega <= "
-                    f"{ex.RUNNER_CAPPED_MAX:g}): the runner step blends into backward "
-                    "Euler and gives the massless limit, runner follows the sphere"
-                )
-            else:
-                parts.append(
-                    f"runner period resolved by only {nrp:.3g} sub-steps (the "
-                    f"default caps them above omega_n/Omega = "
-                    f"{ex.RUNNER_RESOLVED_MAX:g}): mean v* not guaranteed converged "
-                    "in the step"
-                )
-        elif r >= 2 and ref is not None:
-            parts.append(f"stiff runner: {v / ref:.2g} x {ref_name}")
-        elif ref is not None and 0.5 <= r <= 2 and v > ref:
-            parts.append("resonant band: above the quasi-static value")
+        ref = _eq_ref(delta, eps, w)
+        parts = _motion_notes(res, (delta, eps, w), r, mu, periods, ref, quasi_static)
+        parts += _runner_notes(res, r, ref)
         if rel > 0.1:
-            rel4 = res4["energy_residual"]
-            if res["runner_steps_per_period"] < math.pi:
-                parts.append(
-                    f"{rel:.0%} of the work put in is dissipated by the numerics: the "
-                    "runner period is not resolved (omega_n dt > 2), and the runner "
-                    "step's blend into backward Euler damps the runner's ringing"
-                )
-            elif abs(rel4 - rel) <= 0.1 * rel:
-                wl = 2 * w * ex.DEFAULT_RESOLUTION / r  # 2 pi omega R / omega_n, in cells
-                parts.append(
-                    f"{rel:.0%} of the work put in is dissipated by the numerics, "
-                    f"the same at 4x the sub-steps ({rel4:.0%}): the uniform cells "
-                    "average out the runner's ringing imprinted on the stuck contact "
-                    f"(its wavelength 2 pi omega R / omega_n is {wl:.2g} cells), "
-                    "large against the little work a runner this light draws"
-                )
-            else:
-                parts.append(
-                    f"{rel:.0%} of the work put in is dissipated by the numerics "
-                    f"({rel4:.0%} at 4x the sub-steps)"
-                )
+            parts.append(_dissipation_note(res, res4["energy_residual"], rel, w, r))
         if note:
             parts.append(note)
         return _row(
@@ -134,6 +70,92 @@ def _sim(delta, eps, w, r, mu=math.inf, periods=20, quasi_static=False, note="")
         )
 
     return run
+
+
+def _motion_notes(res, square_wave, r, mu, periods, ref, quasi_static) -> list:
+    """The mean runner velocity against its reference ``ref`` ((value, name)), the slip work
+    and stuck fraction with friction, the quasi-static working point where asked, and why the
+    run is not at steady state where it is not."""
+    delta, eps, w = square_wave
+    v = res["mean_v_star_over_omega_R"]
+    tr = res["trajectory"]
+    parts = [f"v*/(omega R) {v:.4g}"]
+    if ref[0] is not None:
+        parts[0] += f" ({ref[1]} {ref[0]:.4g})"
+    half = tr["stick_fraction"][tr["stick_fraction"].size // 2 :]
+    if math.isfinite(mu):
+        parts.append(
+            f"slip work {res['slip_work']:.3g} per period, stuck fraction {half.mean():.2f}"
+        )
+    if quasi_static:
+        wp = ex.working_point(delta, eps, w)
+        parts.append(f"quasi-static working point {wp['simulated']:.5g}")
+    steady, v3, v4q = _steady(res, periods)
+    if not steady:
+        parts.append(
+            f"NOT at steady state: mean v* over the 3rd / 4th quarter of the run "
+            f"{v3:.3g} / {v4q:.3g}"
+            + (
+                " (heavy runner: relaxation time ~ 1/r^2 periods >> run)"
+                if 0 < r <= 0.01
+                else " (contact sliding: the runner is dragged by friction)"
+                if math.isfinite(mu) and half.mean() < 0.05
+                else ""
+            )
+        )
+    return parts
+
+
+def _runner_notes(res, r, ref) -> list:
+    """What the runner's mass makes of the result: massless, its period under-resolved,
+    stiff, or in the resonant band (``ref``: the reference (value, name))."""
+    v = res["mean_v_star_over_omega_R"]
+    if math.isinf(r):
+        return ["massless runner: force equilibrium, follows the sphere, no net motion"]
+    if not res["step_converged"]:
+        nrp = res["runner_steps_per_period"]
+        if r > ex.RUNNER_CAPPED_MAX:
+            return [
+                f"runner period not resolved ({nrp:.2g} sub-steps per runner "
+                f"period; the default resolves omega_n/Omega <= "
+                f"{ex.RUNNER_CAPPED_MAX:g}): the runner step blends into backward "
+                "Euler and gives the massless limit, runner follows the sphere"
+            ]
+        return [
+            f"runner period resolved by only {nrp:.3g} sub-steps (the "
+            f"default caps them above omega_n/Omega = "
+            f"{ex.RUNNER_RESOLVED_MAX:g}): mean v* not guaranteed converged "
+            "in the step"
+        ]
+    if r >= 2 and ref[0] is not None:
+        return [f"stiff runner: {v / ref[0]:.2g} x {ref[1]}"]
+    if ref[0] is not None and 0.5 <= r <= 2 and v > ref[0]:
+        return ["resonant band: above the quasi-static value"]
+    return []
+
+
+def _dissipation_note(res, rel4, rel, w, r) -> str:
+    """Why a share ``rel`` (over 10%) of the work put in is dissipated by the numerics
+    (``rel4``: the share at 4x the sub-steps)."""
+    if res["runner_steps_per_period"] < math.pi:
+        return (
+            f"{rel:.0%} of the work put in is dissipated by the numerics: the "
+            "runner period is not resolved (omega_n dt > 2), and the runner "
+            "step's blend into backward Euler damps the runner's ringing"
+        )
+    if abs(rel4 - rel) <= 0.1 * rel:
+        wl = 2 * w * ex.DEFAULT_RESOLUTION / r  # 2 pi omega R / omega_n, in cells
+        return (
+            f"{rel:.0%} of the work put in is dissipated by the numerics, "
+            f"the same at 4x the sub-steps ({rel4:.0%}): the uniform cells "
+            "average out the runner's ringing imprinted on the stuck contact "
+            f"(its wavelength 2 pi omega R / omega_n is {wl:.2g} cells), "
+            "large against the little work a runner this light draws"
+        )
+    return (
+        f"{rel:.0%} of the work put in is dissipated by the numerics "
+        f"({rel4:.0%} at 4x the sub-steps)"
+    )
 
 
 def _steady(res, periods, tol=0.05):

@@ -119,36 +119,7 @@ def _env_case(sweep: _EnvSweep, r, step_check=True):
     def run():
         x = sweep(r)
         ml = sweep(math.inf)
-        S = x["runner_steps"]
-        parts = [
-            f"m = {x['mass']:.3g} kg, {x['n_sub']} sub-steps per tick"
-            + ("" if math.isinf(S) else f" ({S:.3g} per runner period)")
-            + f"; x* after {sweep.periods} periods {x['x']:.4g} tolerances"
-        ]
-        if math.isinf(r):
-            parts.append("massless runner: force equilibrium, follows the sphere")
-        else:
-            parts.append(f"{abs(x['x'] - ml['x']):.3g} tolerances from the massless runner's")
-        e = x["energy"]
-        parts.append(
-            f"work put in {e['work_in']:.3g} x 2 G* a_max^3 per period"
-            + (
-                f" (below the round-off floor {FLOOR:g}: the residual is relative to the floor)"
-                if x["floored"]
-                else ""
-            )
-            + f", slip work {e['slip']:.3g}"
-        )
-        if not math.isinf(S):
-            q = (2 * math.pi / S) ** 2 / _K.THETA2_BLEND
-            lam = 1.0 / (1.0 + q**4)
-            if lam < 0.99:
-                parts.append(
-                    f"runner period resolved by only {S:.3g} sub-steps (omega_n dt = "
-                    f"{2 * math.pi / S:.2g} at N_max): the runner step is "
-                    f"{1 - lam:.0%} backward Euler (the kernel's blend), which "
-                    "damps the ringing and tends to the massless limit"
-                )
+        parts = _env_notes(x, ml, r, sweep.periods)
         step, conv = "-", None
         if step_check:
             x4 = sweep(r, 4)
@@ -157,32 +128,7 @@ def _env_case(sweep: _EnvSweep, r, step_check=True):
             step = f"x* {dx:.1e} tol., residual {x4['residual']:.2g} at 4x" + (
                 "" if conv else " NOT converged"
             )
-            if x["residual"] <= -RESID_TOL_ENV:
-                e4 = x4["energy"]
-                w = e["work_in"]
-                w4 = e4["work_in"]
-                k = max(_LEDGER_TERMS, key=lambda t: abs(e[t] / w - e4[t] / w4))
-                parts.append(
-                    f"energy created beyond {RESID_TOL_ENV:g} of the work put in; at "
-                    f"4x the sub-steps the residual is {x4['residual']:+.2g}, and the "
-                    f"ledger term that changes most is the {k} work: {e[k] / w:.4g} of "
-                    f"the work put in, {e4[k] / w4:.4g} at 4x"
-                    + (
-                        ": the slip work, second order in the sub-step, is overbooked at "
-                        "the scene's sub-steps"
-                        if k == "slip" and e[k] / w > e4[k] / w4
-                        else ""
-                    )
-                )
-            elif x["residual"] > 0.1 and abs(x4["residual"] - x["residual"]) < (
-                0.1 * x["residual"]
-            ):
-                parts.append(
-                    f"residual {x['residual']:.2g}, the same at 4x the sub-steps: "
-                    "the uniform cells average out the runner's ringing imprinted on "
-                    f"the stuck contact (its wavelength {x['ringing_cells']:.2g} "
-                    "cells), not the step"
-                )
+            parts += _env_residual_notes(x, x4)
         return _row(
             x["finite"],
             x["residual"],
@@ -195,6 +141,72 @@ def _env_case(sweep: _EnvSweep, r, step_check=True):
         )
 
     return run
+
+
+def _env_notes(x, ml, r, periods) -> list:
+    """The outcome of ``env_run`` ``x`` (``ml``: the massless runner's): the runner, its
+    final x*, the work put in, and how far the runner step is backward Euler."""
+    S = x["runner_steps"]
+    parts = [
+        f"m = {x['mass']:.3g} kg, {x['n_sub']} sub-steps per tick"
+        + ("" if math.isinf(S) else f" ({S:.3g} per runner period)")
+        + f"; x* after {periods} periods {x['x']:.4g} tolerances"
+    ]
+    if math.isinf(r):
+        parts.append("massless runner: force equilibrium, follows the sphere")
+    else:
+        parts.append(f"{abs(x['x'] - ml['x']):.3g} tolerances from the massless runner's")
+    e = x["energy"]
+    parts.append(
+        f"work put in {e['work_in']:.3g} x 2 G* a_max^3 per period"
+        + (
+            f" (below the round-off floor {FLOOR:g}: the residual is relative to the floor)"
+            if x["floored"]
+            else ""
+        )
+        + f", slip work {e['slip']:.3g}"
+    )
+    if not math.isinf(S):
+        q = (2 * math.pi / S) ** 2 / _K.THETA2_BLEND
+        lam = 1.0 / (1.0 + q**4)
+        if lam < 0.99:
+            parts.append(
+                f"runner period resolved by only {S:.3g} sub-steps (omega_n dt = "
+                f"{2 * math.pi / S:.2g} at N_max): the runner step is "
+                f"{1 - lam:.0%} backward Euler (the kernel's blend), which "
+                "damps the ringing and tends to the massless limit"
+            )
+    return parts
+
+
+def _env_residual_notes(x, x4) -> list:
+    """Where energy is created beyond ``RESID_TOL_ENV``, the ledger term that changes most at
+    4x the sub-steps (``x4``); where over 10% is dissipated the same at 4x, why."""
+    e, e4 = x["energy"], x4["energy"]
+    if x["residual"] <= -RESID_TOL_ENV:
+        w = e["work_in"]
+        w4 = e4["work_in"]
+        k = max(_LEDGER_TERMS, key=lambda t: abs(e[t] / w - e4[t] / w4))
+        return [
+            f"energy created beyond {RESID_TOL_ENV:g} of the work put in; at "
+            f"4x the sub-steps the residual is {x4['residual']:+.2g}, and the "
+            f"ledger term that changes most is the {k} work: {e[k] / w:.4g} of "
+            f"the work put in, {e4[k] / w4:.4g} at 4x"
+            + (
+                ": the slip work, second order in the sub-step, is overbooked at "
+                "the scene's sub-steps"
+                if k == "slip" and e[k] / w > e4[k] / w4
+                else ""
+            )
+        ]
+    if x["residual"] > 0.1 and abs(x4["residual"] - x["residual"]) < (0.1 * x["residual"]):
+        return [
+            f"residual {x['residual']:.2g}, the same at 4x the sub-steps: "
+            "the uniform cells average out the runner's ringing imprinted on "
+            f"the stuck contact (its wavelength {x['ringing_cells']:.2g} "
+            "cells), not the step"
+        ]
+    return []
 
 
 def _env_continuity_case(sweep: _EnvSweep, ratios):

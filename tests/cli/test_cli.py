@@ -483,14 +483,24 @@ def test_unwritable_out_fails_before_any_work(tmp_path, capsys, monkeypatch, arg
 
 
 @pytest.mark.parametrize(
-    "command,module,default",
+    "command,module,report_module,default",
     [
-        ("stability", "rolling_env.studies.stability", "results/stability.md"),
-        ("bench", "rolling_env.studies.bench", "results/benchmarks.md"),
+        (
+            "stability",
+            "rolling_env.studies.stability",
+            "rolling_env.studies.stability",
+            "results/stability.md",
+        ),
+        (
+            "bench",
+            "rolling_env.studies.bench",
+            "rolling_env.studies.bench_report",
+            "results/benchmarks.md",
+        ),
     ],
 )
 def test_quick_report_is_written_only_where_out_is_given(
-    tmp_path, monkeypatch, capsys, command, module, default
+    tmp_path, monkeypatch, capsys, command, module, report_module, default
 ):
     """--quick never writes the full report's default path, also when it is spelled
     differently (./results/... was compared as a string and overwrote the full report with
@@ -501,7 +511,9 @@ def test_quick_report_is_written_only_where_out_is_given(
 
     mod = importlib.import_module(module)
     monkeypatch.setattr(mod, "run", lambda quick=False: [] if command == "stability" else {})
-    monkeypatch.setattr(mod, "report", lambda rows: "QUICK REPORT\n")
+    monkeypatch.setattr(
+        importlib.import_module(report_module), "report", lambda rows: "QUICK REPORT\n"
+    )
     monkeypatch.chdir(tmp_path)
     assert main([command, "--quick"]) == 0
     assert not (tmp_path / default).exists(), "--quick wrote the full report's path"

@@ -17,6 +17,7 @@ from rolling_env.physics import _kernel as K
 from rolling_env.physics import analytic
 from rolling_env.physics import experiments as ex
 from rolling_env.physics.excitation import SquareWave
+from rolling_env.physics.mindlin import mindlin
 from rolling_env.physics.model import Drive, DriveParams
 
 GEO = ex.Geometry()
@@ -52,7 +53,7 @@ def test_hertz_normal_force_exact_on_any_grid(resolution, N):
 def test_cattaneo_mindlin_curve(mu):
     """Tangential loading of a pressed sphere follows T = mu N [1 - (1 - u/u*)^1.5] (MDR is exact
     in the continuum); max error 2e-3 of mu N at the default resolution."""
-    r = ex.mindlin(mu, points=41)
+    r = mindlin(mu, points=41)
     err = np.max(np.abs(np.array(r["T_over_muN"]) - np.array(r["analytic"])))
     assert err < 2e-3, f"Mindlin curve max |T/(mu N) error| {err:.2e} for mu = {mu}"
     assert abs(r["T_over_muN"][-1] - 1.0) < 1e-9, "beyond u* the whole contact slides: T = mu N"
@@ -61,7 +62,7 @@ def test_cattaneo_mindlin_curve(mu):
 def test_mindlin_converges_with_resolution():
     errs = []
     for res in (8, 32, 128):
-        r = ex.mindlin(0.3, points=41, resolution=res)
+        r = mindlin(0.3, points=41, resolution=res)
         errs.append(np.max(np.abs(np.array(r["T_over_muN"]) - np.array(r["analytic"]))))
     assert errs[0] > errs[1] > errs[2], f"Mindlin error must fall with resolution: {errs}"
 
@@ -399,12 +400,12 @@ def test_run_lengths_are_integers_in_range(bad):
     = 2.5 ran as 2; inf, NaN and None raised OverflowError / TypeError naming nothing; 10**20
     points reached numpy's 'Maximum allowed size exceeded')."""
     with pytest.raises(ValueError, match=r"^points must be an integer in \[2, 100000\]"):
-        ex.mindlin(0.3, points=bad, resolution=8)
+        mindlin(0.3, points=bad, resolution=8)
     with pytest.raises(ValueError, match=r"^periods must be an integer in \[2, 2000\]"):
         ex.working_point(0.7, 0.1, 2.5, periods=bad)
     if not (type(bad) is int and bad == 1):  # 1 sub-step is allowed
         with pytest.raises(ValueError, match=r"^n_sub must be an integer in \[1, 1000000000\]"):
-            ex.mindlin(0.3, points=5, resolution=8, n_sub=bad)
+            mindlin(0.3, points=5, resolution=8, n_sub=bad)
 
 
 @pytest.mark.parametrize(

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rolling_env.studies import bench_host
-from rolling_env.studies.bench import ratio_bound
+from rolling_env.studies.bench_report import ratio_bound
 
 
 @pytest.mark.parametrize(
