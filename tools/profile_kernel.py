@@ -33,7 +33,13 @@ def _kernel_dispatchers():
     from rolling_env.env import _envkernel as EK
     from rolling_env.physics import _kernel as K
 
-    return [v for m in (EK, K) for v in vars(m).values() if hasattr(v, "overloads")]
+    mods = (EK, *K.MODULES)
+    return [
+        v
+        for m in mods
+        for v in vars(m).values()
+        if hasattr(v, "overloads") and v.py_func.__module__ == m.__name__
+    ]
 
 
 def _perf_map_lines(tmp: str) -> list[str]:

@@ -1,6 +1,6 @@
 """Private numba kernel of one control tick of RollingDrive-v0 for a batch of envs.
 
-Action mapping, stroke saturation, the physics tick (``_kernel._tick``), observation and
+Action mapping, stroke saturation, the physics tick (``_kernel.tick._tick``), observation and
 reward in one compiled call.  The single env runs it with a batch of one, the vector envs with
 N, so both give bit-identical transitions by construction.  Scene constants travel in ``sv``
 (indices ``S_*``); everything is SI outside ``_tick``.
@@ -9,6 +9,7 @@ N, so both give bit-identical transitions by construction.  Scene constants trav
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 from numba import njit, prange
@@ -319,14 +320,11 @@ def scene_vector(scene, a_max: float, drive, scales=None) -> np.ndarray:
 
 
 def _keep_cache_in_step():
-    """The cache of these kernels is valid only for the current _kernel.py and _compiler.py
-    (see _cachestamp)."""
-    from rolling_env.physics._cachestamp import bind_sources, drop_if_stale, sources_digest
+    """The cache of these kernels is valid only for the current physics kernel (every file of
+    ``_kernel``), this file and _compiler.py (see _cachestamp)."""
+    from rolling_env.physics._cachestamp import keep_in_step
 
-    digest = sources_digest(K.__file__, __file__, _compiler.__file__)
-    kernels = [f for f in globals().values() if hasattr(f, "_cache") and hasattr(f, "py_func")]
-    if not bind_sources(kernels, digest):
-        drop_if_stale(getattr(env_step_serial._cache, "cache_path", None), "_envkernel", digest)
+    keep_in_step([sys.modules[__name__]], K.SOURCES + (__file__, _compiler.__file__))
 
 
 _keep_cache_in_step()

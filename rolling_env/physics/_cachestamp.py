@@ -1,9 +1,10 @@
 """Keep numba's on-disk cache of the env kernels in step with the physics they embed.
 
 numba revalidates a cached function against a stamp of *its own* source file only, taken when
-the function is defined.  The env kernels in ``_envkernel.py`` compile ``_kernel.py``'s physics
-into their machine code, so after an edit of ``_kernel.py`` (or a ``git pull`` that changes
-only that file in an editable install) their cache would keep running the old physics.
+the function is defined.  The env kernels in ``_envkernel.py`` compile the physics of the
+``_kernel`` package into their machine code, and the tick in ``_kernel/tick.py`` inlines the
+steps of the other kernel modules, so after an edit of one of them (or a ``git pull`` that
+changes only that file in an editable install) their cache would keep running the old physics.
 
 ``bind_sources`` extends the stamp each env-kernel dispatcher checks and writes with a digest
 of every file it embeds.  Like numba's own stamp it is taken at import, per process, so a
@@ -68,3 +69,22 @@ def drop_if_stale(cache_dir, prefix: str, digest: str) -> bool:
     except OSError:
         pass
     return dropped
+
+
+def keep_in_step(modules, files) -> None:
+    """Bind every compiled function that ``modules`` define to the digest of ``files``
+    (``bind_sources``); where numba's internals differ, drop each module's cache files when
+    the digest changed (``drop_if_stale``)."""
+    digest = sources_digest(*files)
+    for m in modules:
+        kernels = [
+            f
+            for f in vars(m).values()
+            if hasattr(f, "_cache")
+            and type(f._cache).__name__ != "NullCache"  # not cached (cache=False)
+            and hasattr(f, "py_func")
+            and getattr(f.py_func, "__module__", None) == m.__name__
+        ]
+        if kernels and not bind_sources(kernels, digest):
+            cache_dir = getattr(kernels[0]._cache, "cache_path", None)
+            drop_if_stale(cache_dir, m.__name__.rsplit(".", 1)[-1], digest)

@@ -39,11 +39,11 @@ from rolling_env.studies.bench_timing import (
 CPU_HZ_FALLBACK = 3.0e9  # when /proc/cpuinfo gives no clock
 FP_PER_CYCLE = 4  # double-precision vector operations per cycle (2 add + 2 mul/FMA pipes)
 STORES_PER_CYCLE = 2  # two store ports (AMD Zen 4/5, Intel since Ice Lake)
-# doubles per vector operation: the inner-cell loops are vectorised (_kernel._FM_INNER); Zen 4's
-# pipes are 256 bits wide (it splits AVX-512 in two halves), so 4 doubles
+# doubles per vector operation: the inner-cell loops are vectorised (_kernel.layout._FM_INNER);
+# Zen 4's pipes are 256 bits wide (it splits AVX-512 in two halves), so 4 doubles
 SIMD_DOUBLES = 4
 # the minimal update of one cell inside the contact per sub-step (build + commit, see
-# _kernel._tick): with friction the friction limit (a quadratic, 13 operations), clip and slope
+# _kernel.tick._tick): with friction the friction limit (a quadratic, 13 operations), clip and slope
 # (4), content and sums (6), commit with clip, slip and sums (13), storing A, L and U;
 # without friction a copy, the creep update and two sums, storing A and U
 OPS_PER_CELL = {"finite_mu": 36, "infinite_mu": 6}

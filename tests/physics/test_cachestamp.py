@@ -7,6 +7,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 from types import SimpleNamespace
 
 from rolling_env.env import _envkernel as EK
@@ -17,10 +18,34 @@ from rolling_env.physics._cachestamp import bind_sources, drop_if_stale, sources
 
 def test_env_kernels_are_bound_to_the_current_physics():
     # the compiler options of _compiler shape their machine code too
-    digest = sources_digest(K.__file__, EK.__file__, _compiler.__file__)
+    digest = sources_digest(*K.SOURCES, EK.__file__, _compiler.__file__)
     for f in (EK.env_step_serial, EK.env_step_parallel, EK._env_tick):
         stamp = f._cache._cache_file._source_stamp
         assert stamp[0] == "rolling_env" and stamp[1][1] == digest, f"{f} not bound: {stamp}"
+
+
+def test_physics_kernels_are_bound_to_every_kernel_file():
+    """A kernel module's compiled functions embed the other modules' inlined steps (the tick
+    inlines the walk, the runner step, the commit, ...): each is bound to all of them.  The
+    steps LLVM inlines (``K.JIT_INLINE``) are not cached on their own: only in the tick."""
+    pkg = Path(K.__file__).parent
+    assert set(K.SOURCES) == {str(f) for f in pkg.glob("*.py")}
+    assert {m.__file__ for m in K.MODULES} | {K.__file__} == set(K.SOURCES)
+    digest = sources_digest(*K.SOURCES, _compiler.__file__)
+    bound = 0
+    steps = 0
+    for m in K.MODULES:
+        for f in vars(m).values():
+            if hasattr(f, "py_func") and f.py_func.__module__ == m.__name__:
+                if f.targetoptions.get("forceinline"):
+                    assert type(f._cache).__name__ == "NullCache", f"{f}: a step cached on its own"
+                    steps += 1
+                    continue
+                stamp = f._cache._cache_file._source_stamp
+                assert stamp[0] == "rolling_env" and stamp[1][1] == digest, f"{f} not bound"
+                bound += 1
+    assert bound > 20, bound
+    assert steps > 5, steps
 
 
 def test_bind_sources_is_idempotent_and_reports_missing_internals():

@@ -536,6 +536,24 @@ def test_kernels_compile_without_reference_counting():
     assert K.JIT["error_model"] == "numpy"
 
 
+def test_only_the_ticks_steps_are_inlined_by_llvm():
+    """The tick's steps are marked for LLVM to inline (``K.JIT_INLINE``); every other kernel
+    of the physics sets ``forceinline=False`` itself, since numba would otherwise hand a
+    step's ``forceinline`` down to the kernels it calls (the vectorised cell loops are
+    1.1-1.2x slower inlined into the tick: docs/performance-log.md)."""
+    kernels = {
+        f"{m.__name__}.{n}": v
+        for m in K.MODULES
+        for n, v in vars(m).items()
+        if hasattr(v, "py_func") and v.py_func.__module__ == m.__name__
+    }
+    unset = sorted(n for n, d in kernels.items() if "forceinline" not in d.targetoptions)
+    assert not unset, f"kernels that leave forceinline to their caller: {unset}"
+    steps = {n.rsplit(".", 1)[1] for n, d in kernels.items() if d.targetoptions["forceinline"]}
+    assert {"_build", "_runner", "_commit_cells", "_commit_edges", "_ledger"} <= steps, steps
+    assert not steps & {"_tick", "_build_inner", "_commit", "_solve_runner", "_set_radius"}
+
+
 @njit
 def _run(W, st, p, d, u, v, mu, mass, load, n_sub, dt, outs, ledger):
     for k in range(d.shape[0]):
