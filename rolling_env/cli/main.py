@@ -94,6 +94,21 @@ def folder_path(name):
     return conv
 
 
+def add_report_arguments(p, default: str, quick_help: str) -> None:
+    """``--out``, ``--quick`` and ``--json`` of a command that writes one report (read by
+    ``report_out``)."""
+    p.add_argument(
+        "--out",
+        type=file_path("out"),
+        default=None,
+        help=f"report path (default {default}, relative to the current "
+        "directory; with --quick the report is only printed unless --out is "
+        "given)",
+    )
+    p.add_argument("--quick", action="store_true", help=quick_help)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
 def report_out(args, default: str):
     """Where a command with ``--quick`` writes its report: ``--out`` where given, else
     ``default``, but nowhere for ``--quick`` without ``--out`` (a quick subset never replaces

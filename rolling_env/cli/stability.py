@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from rolling_env.cli.main import emit, file_path, report_out
+from rolling_env.cli.main import add_report_arguments, emit, report_out
 
 DEFAULT_OUT = "results/stability.md"
 
@@ -21,16 +21,7 @@ def register(sub):
         "case, tolerances stated in it) and print it.  Exit code 1 if any case "
         "fails.",
     )
-    p.add_argument(
-        "--out",
-        type=file_path("out"),
-        default=None,
-        help=f"report path (default {DEFAULT_OUT}, relative to the current "
-        "directory; with --quick the report is only printed unless --out is "
-        "given)",
-    )
-    p.add_argument("--quick", action="store_true", help="a smaller, faster subset")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
+    add_report_arguments(p, DEFAULT_OUT, "a smaller, faster subset")
     p.set_defaults(func=_run)
 
 
