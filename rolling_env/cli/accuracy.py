@@ -16,7 +16,8 @@ def register(sub):
         help="error of the env at a scene's shipped settings against "
         "a refined reference, and its steps/s",
         description="Run the scene's standard episodes at its shipped settings "
-        "(Eq. 32 feedback, Eq. 32 open loop, uniform random actions, and with --agents "
+        "(Eq. 32 feedback, Eq. 32 open loop, uniform random actions, bang-bang actions "
+        "(each tick a random corner of the action box), and with --agents "
         "one of each trained agent configuration), replay each "
         "action sequence open loop at two refined levels (sub-steps x K and 2K, "
         "grid x G and 2G), extrapolate them (Richardson, assumed second order) "
@@ -48,6 +49,14 @@ def register(sub):
         type=positive_int("episodes-random", 0, 100),
         default=1,
         help="episodes of uniform random actions (default 1)",
+    )
+    p.add_argument(
+        "--episodes-bang-bang",
+        type=positive_int("episodes-bang-bang", 0, 100),
+        default=1,
+        help="episodes of bang-bang actions, each tick a random corner of the action box "
+        "(load down to N_min or up to N_max, full rolling rate and creep either way; "
+        "default 1)",
     )
     p.add_argument(
         "--seed",
@@ -93,6 +102,7 @@ def _command(args) -> str:
         ("--refine", args.refine, DEFAULT_REFINE),
         ("--refine-grid", args.refine_grid, DEFAULT_GRID),
         ("--episodes-random", args.episodes_random, 1),
+        ("--episodes-bang-bang", args.episodes_bang_bang, 1),
         ("--seed", args.seed, 0),
         ("--episode-steps", args.episode_steps, None),
         ("--variants", args.variants, False),
@@ -152,6 +162,7 @@ def _run(args):
         refine=args.refine,
         grid=args.refine_grid,
         episodes_random=args.episodes_random,
+        episodes_bang_bang=args.episodes_bang_bang,
         seed=args.seed,
         overrides=overrides,
     )

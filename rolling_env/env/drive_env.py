@@ -147,6 +147,13 @@ class RollingDriveEnv(gym.Env):
       ``default``, 23 on ``loaded`` and ``resonant``), which the wear charged from the
       onset of sliding allows at unchanged accuracy; ``light_stiff`` keeps its 182 with
       ``accuracy: 0.0025``.
+    * v0, sub-steps for bang-bang actions (same id, action mapping, observations, reward
+      definition and scene physics; different transitions on ``default``, ``loaded`` and
+      ``resonant``): with finite friction "auto" takes twice the sub-steps again (23 on
+      ``default``, 46 on ``loaded`` and ``resonant``): with half as many, bang-bang actions
+      (full-rate rolling reversals and load changes every tick) ended up to 0.27 tolerance
+      from the converged runner position on ``default`` and 0.22 on ``resonant``.
+      ``light_stiff`` keeps its 182, now at the default ``accuracy``.
     """
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 30}

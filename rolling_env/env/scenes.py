@@ -87,8 +87,10 @@ EPISODE_STEPS_MAX = 10**8
 # friction (the trailing edge's cells, each charged from the onset of its sliding),
 # C_TRAVEL_STICK x that with infinite friction, and by about C_RUNNER x (omega_n dt)^2 for a
 # free runner (omega_n on the stuck contact at N_max).  Upper bounds measured on the shipped
-# scenes' episodes and their held-out variants against refined runs (docs/numerics.md).
-C_TRAVEL = 0.005
+# scenes' episodes (bang-bang actions, which reverse the rolling at full rate and change the
+# load every tick, set C_TRAVEL) and their held-out variants against refined runs
+# (docs/numerics.md).
+C_TRAVEL = 0.02
 C_TRAVEL_STICK = 0.002
 C_RUNNER = 0.2
 AUTO_SUB_STEPS_MAX = 4096

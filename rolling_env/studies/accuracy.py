@@ -3,7 +3,10 @@
 Per scene, the standard episodes are run at the shipped settings (``rolling_env.make(scene)``)
 and their actions recorded: one episode of the Eq. 32 feedback baseline, one of the Eq. 32
 open-loop baseline, and ``episodes_random`` episodes of uniform random actions (pre-sampled
-from ``numpy.random.default_rng(seed)``), and optionally one deterministic episode of each
+from ``numpy.random.default_rng(seed)``), ``episodes_bang_bang`` episodes of bang-bang actions
+(each tick a random corner of the action box, from their own generator: every other tick on
+average the load drops to N_min, lift-off where N_min = 0, and the rolling rate and the creep
+reverse at full size), and optionally one deterministic episode of each
 trained agent given (the first seed of each configuration under a runs folder, kind
 ``agent``).  Each action sequence is then replayed open loop,
 so that no feedback can hide a drift, at the shipped settings (timed: steps per second) and at
@@ -37,7 +40,7 @@ ORDER = 2.0  # assumed order of the error in the refinement factor (Richardson)
 DEFAULT_REFINE = 8  # K: sub-steps x K and x 2K at the two reference levels
 DEFAULT_GRID = 4  # G: the grid (resolution) x G and x 2G at the two reference levels
 TIMING_REPEATS = 3  # the shipped replay is timed this often; the fastest run counts
-KINDS = ("eq32-feedback", "eq32-open-loop", "random", "agent")
+KINDS = ("eq32-feedback", "eq32-open-loop", "random", "bang-bang", "agent")
 
 
 def shipped_numerics(env) -> tuple[int, float]:
@@ -114,6 +117,15 @@ class _Sequence:
         return a, state
 
 
+def bang_bang_actions(seed: int, steps: int, episodes: int) -> list[np.ndarray]:
+    """``episodes`` sequences of ``steps`` bang-bang actions (each component -1 or +1, drawn
+    with equal odds) from ``numpy.random.default_rng([seed, 1])``: a generator of their own,
+    so that adding them leaves the uniform random episodes of ``seed`` as they were."""
+    rng = np.random.default_rng([seed, 1])
+    corners = np.array([-1.0, 1.0], dtype=np.float32)
+    return [rng.choice(corners, (steps, 3)) for _ in range(episodes)]
+
+
 def record(
     scene,
     kind: str,
@@ -124,8 +136,8 @@ def record(
 ) -> dict:
     """One episode of ``kind`` at the shipped settings: its actions (float32, as the
     controllers give them), final x* [m], total slip work [J] and target [m].  ``random``
-    plays ``actions`` (pre-sampled); ``agent`` the trained ``model`` (an SB3 .zip, loaded by
-    ``rollout.make_controller``, deterministic)."""
+    and ``bang-bang`` play ``actions`` (pre-sampled); ``agent`` the trained ``model`` (an
+    SB3 .zip, loaded by ``rollout.make_controller``, deterministic)."""
     from rolling_env.env.baselines import Eq32Feedback, Eq32OpenLoop
     from rolling_env.env.rollout import make_controller, rollout
 
@@ -134,7 +146,7 @@ def record(
         ctrl = Eq32Feedback.from_env(env)
     elif kind == "eq32-open-loop":
         ctrl = Eq32OpenLoop.from_env(env)
-    elif kind == "random":
+    elif kind in ("random", "bang-bang"):
         ctrl = _Sequence(actions)
     elif kind == "agent":
         ctrl = make_controller(str(model), env, seed=seed, scene=scene)
@@ -260,6 +272,7 @@ def scene_accuracy(
     episodes_random: int = 1,
     seed: int = 0,
     overrides: dict | None = None,
+    episodes_bang_bang: int = 1,
     level_factors=None,
     order: float = ORDER,
     timing_repeats: int = TIMING_REPEATS,
@@ -294,6 +307,10 @@ def scene_accuracy(
         label = "random" if episodes_random == 1 else f"random {i + 1}"
         acts = rng.uniform(-1.0, 1.0, (steps, 3)).astype(np.float32)
         plan.append(("random", label, {"actions": acts}))
+    bang = bang_bang_actions(seed, steps, episodes_bang_bang)
+    for i, acts in enumerate(bang):
+        label = "bang-bang" if len(bang) == 1 else f"bang-bang {i + 1}"
+        plan.append(("bang-bang", label, {"actions": acts}))
     plan += [("agent", label, {"model": path}) for label, path in models]
 
     episodes = []

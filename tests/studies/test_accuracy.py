@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
 import pytest
 
 import rolling_env
@@ -96,6 +97,7 @@ def test_json_has_the_documented_keys_and_finite_values(tmp_path, capsys):
         "eq32-open-loop",
         "random 1",
         "random 2",
+        "bang-bang",
     ]
     for e in r["episodes"]:
         assert EPISODE_KEYS <= set(e), set(e) ^ EPISODE_KEYS
@@ -104,7 +106,7 @@ def test_json_has_the_documented_keys_and_finite_values(tmp_path, capsys):
         assert e["steps_per_s"] > 0
     assert all(math.isfinite(x) for x in _numbers(r))
     text = out.read_text()
-    assert "| random 2 |" in text and "--episode-steps 32" in text
+    assert "| random 2 |" in text and "| bang-bang |" in text and "--episode-steps 32" in text
 
 
 def test_reference_at_the_shipped_settings_gives_zero_error():
@@ -152,6 +154,7 @@ def test_richardson_second_order():
         (["--scene", "default", "--refine", "two"], "refine must be an integer"),
         (["--scene", "default", "--refine-grid", "0"], "refine-grid must be an integer in"),
         (["--scene", "default", "--episodes-random", "-1"], "episodes-random must be an integer"),
+        (["--scene", "default", "--episodes-bang-bang", "x"], "episodes-bang-bang must be an"),
         (["--scene", "default", "--seed", "-1"], "seed must be an integer in"),
         (["--scene", "default", "--episode-steps", "0"], "episode-steps must be an integer in"),
         (["--scene", "default", "--out", "{dir}/"], "out must be a file path"),
@@ -200,6 +203,8 @@ def test_all_writes_one_report_of_every_scene(tmp_path, capsys, monkeypatch):
                 "16",
                 "--episodes-random",
                 "0",
+                "--episodes-bang-bang",
+                "0",
                 "--json",
                 "--out",
                 str(out),
@@ -213,6 +218,7 @@ def test_all_writes_one_report_of_every_scene(tmp_path, capsys, monkeypatch):
     text = out.read_text()
     assert text.startswith("# Accuracy") and "## default" in text
     assert "rolling-drive accuracy --all --refine 1 --refine-grid 1" in text
+    assert "--episodes-bang-bang 0" in text, "the report's command must reproduce the run"
 
 
 def test_agents_add_one_episode_per_configuration(tmp_path, capsys):
@@ -230,7 +236,7 @@ def test_agents_add_one_episode_per_configuration(tmp_path, capsys):
     (runs / "td3_seed0").mkdir()  # no model.zip
     argv = ["accuracy", "--scene", "default", "--agents", str(tmp_path / "runs")]
     argv += ["--refine", "1", "--refine-grid", "1", "--episode-steps", "16"]
-    assert main([*argv, "--episodes-random", "0", "--json"]) == 0
+    assert main([*argv, "--episodes-random", "0", "--episodes-bang-bang", "0", "--json"]) == 0
     r = json.loads(capsys.readouterr().out)
     eps = {e["label"]: e for e in r["episodes"]}
     assert list(eps) == ["eq32-feedback", "eq32-open-loop", "ppo_seed0", "sac_seed0"], list(eps)
@@ -251,7 +257,8 @@ def test_variants_run_each_held_out_variant_with_its_physics(capsys):
     from rolling_env.env.scenes import variants
 
     argv = ["accuracy", "--scene", "loaded", "--variants", "--refine", "1", "--refine-grid"]
-    argv += ["1", "--episode-steps", "8", "--episodes-random", "0", "--json"]
+    argv += ["1", "--episode-steps", "8", "--episodes-random", "0", "--episodes-bang-bang", "0"]
+    argv += ["--json"]
     assert main(argv) == 0
     r = json.loads(capsys.readouterr().out)
     want = [label for label, _ in variants("loaded")]
@@ -262,3 +269,43 @@ def test_variants_run_each_held_out_variant_with_its_physics(capsys):
         assert all(e["steps"] == 8 and e["replay_exact"] for e in s["episodes"]), s
     x_lo, x_hi = (by[v]["episodes"][1]["xstar_shipped"] for v in ("F_ext x0.5", "F_ext x1.5"))
     assert x_lo != x_hi, "the load variants ran the same physics"
+
+
+def test_bang_bang_episodes_play_corners_of_the_action_box_and_keep_the_random_ones():
+    """The bang-bang episodes' actions are corners of the action box (each component -1 or
+    +1, both taken), drawn from their own generator: the uniform random episode of the same
+    seed is the same with or without them, and with N_min = 0 the load lifts off (N = 0)."""
+    acts = A.bang_bang_actions(5, 64, 2)
+    assert len(acts) == 2 and all(a.shape == (64, 3) and a.dtype.name == "float32" for a in acts)
+    for a in acts:
+        assert set(np.unique(a)) == {-1.0, 1.0}, np.unique(a)
+        share = (a > 0).mean(axis=0)
+        assert np.all((share > 0.3) & (share < 0.7)), share  # 64 fair draws per component
+    assert not np.array_equal(acts[0], acts[1])
+    assert np.array_equal(A.bang_bang_actions(5, 64, 1)[0], acts[0])
+    with_b = A.scene_accuracy(
+        "default",
+        level_factors=((1, 1), (1, 1)),
+        overrides=QUICK,
+        timing_repeats=1,
+        episodes_bang_bang=1,
+    )
+    without = A.scene_accuracy(
+        "default",
+        level_factors=((1, 1), (1, 1)),
+        overrides=QUICK,
+        timing_repeats=1,
+        episodes_bang_bang=0,
+    )
+    e_with = {e["label"]: e for e in with_b["episodes"]}
+    e_without = {e["label"]: e for e in without["episodes"]}
+    assert list(e_with) == ["eq32-feedback", "eq32-open-loop", "random", "bang-bang"]
+    assert e_with["random"]["xstar_shipped"] == e_without["random"]["xstar_shipped"]
+    rec = A.record(
+        "default", "bang-bang", 0, actions=A.bang_bang_actions(0, 32, 1)[0], overrides=QUICK
+    )
+    assert rec["actions"].shape == (32, 3) and set(np.unique(rec["actions"])) == {-1.0, 1.0}
+    env = rolling_env.make("default", **QUICK)
+    env.reset(seed=0)
+    loads = [env.step(a)[4]["N"] for a in rec["actions"]]
+    assert min(loads) == 0.0 and max(loads) == pytest.approx(env.unwrapped.scene.N_max), loads
