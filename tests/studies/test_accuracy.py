@@ -331,3 +331,24 @@ def test_bang_bang_episodes_end_within_the_accuracy_limit(scene):
         assert err < 0.2, f"{scene} seed {seed}: x* {err:.3f} tolerance from the reference"
         rel = abs(shipped["slip_work"] - s_ref) / s_ref
         assert rel < 5e-3, f"{scene} seed {seed}: slip work {rel:.2%} from the reference"
+
+
+def test_a_lighter_light_runner_gets_the_sub_steps_its_ringing_needs():
+    """The runner rule (each sub-step turns the runner's ringing by at most sqrt(accuracy)
+    rad) sizes the sub-steps of light_stiff with the runner's mass halved, where it, not
+    the patch travel, sets them: its Eq. 32 feedback episode ends within 0.13 tolerance of
+    the refined reference (measured 0.106 at 236 sub-steps; 0.15 at the patch travel's 182,
+    which a rule that let the ringing turn 0.22 rad a sub-step gave)."""
+    ov = {"runner_mass": 2.5e-7}
+    env = rolling_env.make("light_stiff", **ov)
+    assert env.unwrapped.scene.n_sub > 182, "the runner, not the patch travel, sets the count"
+    tol = env.unwrapped.scene.tolerance
+    env.close()
+    rec = A.record("light_stiff", "eq32-feedback", 0, overrides=ov)
+    c, f = [
+        A.replay("light_stiff", rec["actions"], 0, s, r, overrides=ov)
+        for s, r in A.check_levels("light_stiff", A.levels(), ov)
+    ]
+    x_ref = A.richardson(c["xstar"], f["xstar"], 2.0)
+    err = abs(rec["xstar"] - x_ref) / tol
+    assert err < 0.13, f"feedback episode {err:.3f} tolerance from the reference"
