@@ -62,7 +62,7 @@ def register(sub):
         "--seed",
         type=positive_int("seed", 0, 2**31 - 1),
         default=0,
-        help="reset seed of every episode and seed of the random actions (default 0)",
+        help="reset seed of every episode and seed of the random and bang-bang actions (default 0)",
     )
     p.add_argument(
         "--episode-steps",

@@ -148,8 +148,9 @@ class RollingDriveEnv(gym.Env):
       onset of sliding allows at unchanged accuracy; ``light_stiff`` keeps its 182 with
       ``accuracy: 0.0025``.
     * v0, sub-steps for bang-bang actions (same id, action mapping, observations, reward
-      definition and scene physics; different transitions on ``default``, ``loaded`` and
-      ``resonant``): with finite friction "auto" takes twice the sub-steps again (23 on
+      definition and scene physics; different transitions on ``default`` (and its randomised
+      family), ``loaded`` and ``resonant``): with finite friction "auto" takes twice the
+      sub-steps again (23 on
       ``default``, 46 on ``loaded`` and ``resonant``): with half as many, bang-bang actions
       (full-rate rolling reversals and load changes every tick) ended up to 0.27 tolerance
       from the converged runner position on ``default`` and 0.22 on ``resonant``.

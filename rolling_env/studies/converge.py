@@ -143,7 +143,8 @@ def _dyn_rows(kind, value, r, ref, sec):
 
 def env_episodes(scene, seed: int = 0, overrides=None) -> dict:
     """The standard episodes of ``rolling_env.studies.accuracy`` for ``scene``, recorded at its
-    shipped settings (the plan of ``accuracy.scene_accuracy`` with one random episode), each
+    shipped settings (the Eq. 32 and random episodes of ``accuracy.scene_accuracy``'s plan, one
+    random episode and no bang-bang one), each
     with its Richardson-extrapolated reference final x* and slip work at the accuracy module's
     default levels.  Returns the scene's ``name``, the shipped ``sub_steps`` and ``resolution``, the
     ``tolerance`` [m] and the ``episodes`` (label, actions, xstar_reference,

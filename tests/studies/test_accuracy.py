@@ -273,8 +273,9 @@ def test_variants_run_each_held_out_variant_with_its_physics(capsys):
 
 def test_bang_bang_episodes_play_corners_of_the_action_box_and_keep_the_random_ones():
     """The bang-bang episodes' actions are corners of the action box (each component -1 or
-    +1, both taken), drawn from their own generator: the uniform random episode of the same
-    seed is the same with or without them, and with N_min = 0 the load lifts off (N = 0)."""
+    +1, both taken), drawn from their own generator: the random and bang-bang episodes of a
+    seed are each the same whatever the number of the other kind, and with N_min = 0 the
+    load lifts off (N = 0)."""
     acts = A.bang_bang_actions(5, 64, 2)
     assert len(acts) == 2 and all(a.shape == (64, 3) and a.dtype.name == "float32" for a in acts)
     for a in acts:
@@ -283,21 +284,24 @@ def test_bang_bang_episodes_play_corners_of_the_action_box_and_keep_the_random_o
         assert np.all((share > 0.3) & (share < 0.7)), share  # 64 fair draws per component
     assert not np.array_equal(acts[0], acts[1])
     assert np.array_equal(A.bang_bang_actions(5, 64, 1)[0], acts[0])
-    e_with, e_without = (
-        {
-            e["label"]: e
+    runs = {
+        (n_random, n_bang): {
+            e["label"]: e["xstar_shipped"]
             for e in A.scene_accuracy(
                 "default",
                 level_factors=((1, 1), (1, 1)),
                 overrides=QUICK,
                 timing_repeats=1,
-                episodes_bang_bang=n,
+                episodes_random=n_random,
+                episodes_bang_bang=n_bang,
             )["episodes"]
         }
-        for n in (1, 0)
-    )
-    assert list(e_with) == ["eq32-feedback", "eq32-open-loop", "random", "bang-bang"]
-    assert e_with["random"]["xstar_shipped"] == e_without["random"]["xstar_shipped"]
+        for n_random, n_bang in ((1, 1), (1, 0), (2, 1))
+    }
+    assert list(runs[1, 1]) == ["eq32-feedback", "eq32-open-loop", "random", "bang-bang"]
+    assert runs[1, 1]["random"] == runs[1, 0]["random"]
+    assert runs[1, 1]["bang-bang"] == runs[2, 1]["bang-bang"]
+    assert runs[2, 1]["random 1"] == runs[1, 1]["random"]
     rec = A.record(
         "default", "bang-bang", 0, actions=A.bang_bang_actions(0, 32, 1)[0], overrides=QUICK
     )
@@ -313,9 +317,10 @@ def test_bang_bang_episodes_end_within_the_accuracy_limit(scene):
     """Bang-bang actions (full-rate rolling reversals and load changes every tick, lift-off
     at N_min = 0) are the hardest sequences for the sub-step rule's patch-travel constant:
     at the shipped settings twelve such episodes of each finite-friction scene with a
-    runner of moderate mass all end within 0.2 tolerance (the accuracy's hard limit) of the
-    refined reference, and their slip work within 0.5%.  With half the sub-steps (the
-    patch-travel constant a quarter) default's seed 10 ended 0.22 tolerance off."""
+    runner of moderate mass all end within 0.2 tolerance (twice the 0.1 aimed at; the
+    largest measured is 0.12) of the refined reference, and their slip work within 0.5%.
+    With half the sub-steps (the patch-travel constant a quarter) default's seed 10 ended
+    0.22 tolerance off."""
     env = rolling_env.make(scene)
     steps = env.unwrapped.scene.episode_steps
     tol = env.unwrapped.scene.tolerance
