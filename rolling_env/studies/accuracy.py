@@ -121,6 +121,11 @@ def bang_bang_actions(seed: int, steps: int, episodes: int) -> list[np.ndarray]:
     """``episodes`` sequences of ``steps`` bang-bang actions (each component -1 or +1, drawn
     with equal odds) from ``numpy.random.default_rng([seed, 1])``: a generator of their own,
     so that adding them leaves the uniform random episodes of ``seed`` as they were."""
+    from rolling_env.validation import check_int
+
+    seed = check_int("seed", seed, 0, 2**63 - 1)
+    steps = check_int("steps", steps, 1, 10**8)
+    episodes = check_int("episodes", episodes, 0, 10**6)
     rng = np.random.default_rng([seed, 1])
     corners = np.array([-1.0, 1.0], dtype=np.float32)
     return [rng.choice(corners, (steps, 3)) for _ in range(episodes)]

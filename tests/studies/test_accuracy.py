@@ -284,6 +284,9 @@ def test_bang_bang_episodes_play_corners_of_the_action_box_and_keep_the_random_o
         assert np.all((share > 0.3) & (share < 0.7)), share  # 64 fair draws per component
     assert not np.array_equal(acts[0], acts[1])
     assert np.array_equal(A.bang_bang_actions(5, 64, 1)[0], acts[0])
+    for args, name in (((0, 5, -1), "episodes"), ((0, 0, 1), "steps"), ((-1, 5, 1), "seed")):
+        with pytest.raises(ValueError, match=name):
+            A.bang_bang_actions(*args)
     runs = {
         (n_random, n_bang): {
             e["label"]: e["xstar_shipped"]
