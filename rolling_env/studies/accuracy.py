@@ -36,6 +36,8 @@ import time
 
 import numpy as np
 
+from rolling_env.validation import check_int
+
 ORDER = 2.0  # assumed order of the error in the refinement factor (Richardson)
 DEFAULT_REFINE = 8  # K: sub-steps x K and x 2K at the two reference levels
 DEFAULT_GRID = 4  # G: the grid (resolution) x G and x 2G at the two reference levels
@@ -121,8 +123,6 @@ def bang_bang_actions(seed: int, steps: int, episodes: int) -> list[np.ndarray]:
     """``episodes`` sequences of ``steps`` bang-bang actions (each component -1 or +1, drawn
     with equal odds) from ``numpy.random.default_rng([seed, 1])``: a generator of their own,
     so that adding them leaves the uniform random episodes of ``seed`` as they were."""
-    from rolling_env.validation import check_int
-
     seed = check_int("seed", seed, 0, 2**63 - 1)
     steps = check_int("steps", steps, 1, 10**8)
     episodes = check_int("episodes", episodes, 0, 10**6)

@@ -16,6 +16,7 @@ from agents.baselines import Eq32OpenLoop
 from agents.loading import load_agent
 from agents.verdicts import goal_verdicts
 from rolling_env.env.rollout import rollout
+from tests.train_argv import tiny_ppo_argv
 
 
 def _eval_argv(*scenes, out, runs=None, episodes=1, extra=()):
@@ -172,23 +173,7 @@ def trained_run(tmp_path_factory):
     runs = base / "runs"
     assert (
         train_main(
-            [
-                "--algo",
-                "ppo",
-                "--scene",
-                str(scene),
-                "--n-timesteps",
-                "64",
-                "--n-envs",
-                "1",
-                "--eval-freq",
-                "64",
-                "--eval-episodes",
-                "1",
-                "--no-progress",
-                "--run-dir",
-                str(runs / "myscene" / "ppo_seed0"),
-            ]
+            tiny_ppo_argv("--scene", str(scene), "--run-dir", str(runs / "myscene" / "ppo_seed0"))
         )
         == 0
     )
@@ -351,26 +336,7 @@ def test_custom_scene_file_named_like_a_shipped_one_is_not_taken_for_it(
         "the shipped file itself keeps its name"
     )
     monkeypatch.chdir(tmp_path)
-    assert (
-        train_main(
-            [
-                "--algo",
-                "ppo",
-                "--scene",
-                str(custom),
-                "--n-timesteps",
-                "64",
-                "--n-envs",
-                "1",
-                "--eval-freq",
-                "64",
-                "--eval-episodes",
-                "1",
-                "--no-progress",
-            ]
-        )
-        == 0
-    )
+    assert train_main(tiny_ppo_argv("--scene", str(custom))) == 0
     assert not (tmp_path / "runs" / "default").exists(), "landed in runs/default/ silently"
     run = tmp_path / "runs" / key / "ppo_seed0"
     cfg = yaml.safe_load((run / "config.yml").read_text())

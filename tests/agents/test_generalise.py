@@ -10,6 +10,7 @@ import pytest
 import rolling_env
 from agents.generalise import _nominal_controllers, main, variants
 from agents.residual import ResidualAgent
+from tests.train_argv import tiny_ppo_argv
 
 
 @pytest.mark.parametrize(
@@ -57,25 +58,9 @@ def residual_run(tmp_path_factory):
     assert (
         train_main(
             [
-                "--algo",
-                "ppo",
-                "--scene",
-                "loaded",
-                "--conf",
-                str(conf),
-                "--n-timesteps",
-                "128",
-                "--n-envs",
-                "2",
-                "--eval-freq",
-                "128",
-                "--eval-episodes",
-                "1",
-                "--no-progress",
-                "--residual",
-                "eq32-feedback",
-                "--run-dir",
-                str(run),
+                *tiny_ppo_argv(timesteps=128, n_envs=2),
+                *("--scene", "loaded", "--conf", str(conf), "--residual", "eq32-feedback"),
+                *("--run-dir", str(run)),
             ]
         )
         == 0

@@ -11,6 +11,7 @@ from agents.baselines import Eq32Feedback, Eq32OpenLoop
 from agents.loading import load_agent
 from agents.residual import BASES, ResidualAgent, ResidualVecEnv, augment, check_residual, combine
 from rolling_env.env.rollout import rollout
+from tests.train_argv import tiny_ppo_argv
 
 
 def _actions(data):
@@ -163,27 +164,12 @@ def test_a_trained_residual_run_loads_as_a_residual_agent(tmp_path, monkeypatch)
     monkeypatch.chdir(tmp_path)
     assert (
         train_main(
-            [
-                "--algo",
-                "ppo",
-                "--scene",
-                "default",
-                "--seed",
-                "2",
-                "--n-timesteps",
-                "256",
-                "--n-envs",
-                "2",
-                "--eval-freq",
-                "256",
-                "--eval-episodes",
-                "1",
-                "--no-progress",
-                "--residual",
-                "eq32-feedback",
-                "--residual-scale",
-                "0.1",
-            ]
+            tiny_ppo_argv(
+                *("--scene", "default", "--seed", "2", "--residual", "eq32-feedback"),
+                *("--residual-scale", "0.1"),
+                timesteps=256,
+                n_envs=2,
+            )
         )
         == 0
     )

@@ -21,6 +21,7 @@ from agents.evaluate import episode_metrics, held_out_targets
 from agents.hyperparams import parse_kwargs
 from agents.loading import agent_file, load_agent
 from rolling_env.env.rollout import rollout
+from tests.train_argv import tiny_ppo_argv
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -30,24 +31,8 @@ def _train(tmp_path, *extra, timesteps=512, scene="default", n_envs=2):
         sys.executable,
         "-m",
         "agents.train",
-        "--algo",
-        "ppo",
-        "--scene",
-        scene,
-        "--seed",
-        "3",
-        "--n-timesteps",
-        str(timesteps),
-        "--n-envs",
-        str(n_envs),
-        "--eval-freq",
-        "512",
-        "--eval-episodes",
-        "1",
-        "--no-progress",
-        "--run-dir",
-        str(tmp_path / "run"),
-        *extra,
+        *tiny_ppo_argv(timesteps=timesteps, n_envs=n_envs, eval_freq=512),
+        *("--scene", scene, "--seed", "3", "--run-dir", str(tmp_path / "run"), *extra),
     ]
     return cmd
 
@@ -109,7 +94,8 @@ def test_atomic_write_applies_the_umask(tmp_path, monkeypatch):
 
 
 def test_short_training_run_saves_loadable_model(tmp_path):
-    out = subprocess.run(_train(tmp_path), cwd=REPO, capture_output=True, text=True, timeout=300)
+    cmd = _train(tmp_path)
+    out = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     run = tmp_path / "run"
     for f in (
@@ -126,7 +112,8 @@ def test_short_training_run_saves_loadable_model(tmp_path):
     meta = json.loads((run / "meta.json").read_text())
     assert meta["env_steps"] >= 512 and meta["seed"] == 3 and not meta["interrupted"]
     command = (run / "command.txt").read_text()
-    assert command.startswith("python -m agents.train --algo ppo --scene default"), command
+    # the command as given (no argument here needs quoting)
+    assert command.strip() == "python -m agents.train " + " ".join(cmd[3:]), command
     head = subprocess.run(
         ["git", "-C", str(REPO), "rev-parse", "HEAD"], capture_output=True, text=True
     )
@@ -167,19 +154,7 @@ def test_train_refuses_a_used_run_folder(tmp_path, capsys):
     run = tmp_path / "run"
     run.mkdir()
     inode = run.stat().st_ino
-    argv = [
-        "--algo",
-        "ppo",
-        "--n-timesteps",
-        "64",
-        "--n-envs",
-        "1",
-        "--eval-freq",
-        "64",
-        "--eval-episodes",
-        "1",
-        "--no-progress",
-    ]
+    argv = tiny_ppo_argv()
     assert train_main(argv + ["--run-dir", str(run), "--overwrite"]) == 0
     assert run.stat().st_ino == inode, "an empty folder must be used, not deleted and remade"
     assert (run / RUN_MARKER).is_file() and (run / "model.zip").exists()
@@ -695,21 +670,7 @@ def test_exponent_numbers_in_hyperparameter_yaml(tmp_path):
 
 
 def _overwrite_argv(run):
-    return [
-        "--algo",
-        "ppo",
-        "--n-timesteps",
-        "64",
-        "--n-envs",
-        "1",
-        "--eval-freq",
-        "64",
-        "--eval-episodes",
-        "1",
-        "--no-progress",
-        "--run-dir",
-        str(run),
-    ]
+    return tiny_ppo_argv("--run-dir", str(run))
 
 
 def test_overwrite_keeps_the_earlier_run_when_the_new_one_fails(tmp_path, monkeypatch, capsys):

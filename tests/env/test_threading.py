@@ -25,6 +25,7 @@ from rolling_env.env.threads import (
     thread_choices,
 )
 from rolling_env.env.vector import BatchCore
+from tests.train_argv import tiny_ppo_argv
 
 THREADS = min(2, max_threads())
 two_threads = pytest.mark.skipif(max_threads() < 2, reason="numba runs one thread here")
@@ -410,25 +411,9 @@ def test_train_records_the_vector_env_in_meta(tmp_path):
     from agents.train import main as train_main
 
     run = tmp_path / "run"
-    argv = [
-        "--algo",
-        "ppo",
-        "--n-timesteps",
-        "64",
-        "--n-envs",
-        "2",
-        "--eval-freq",
-        "64",
-        "--eval-episodes",
-        "1",
-        "--no-progress",
-        "--run-dir",
-        str(run),
-        "--vec-env",
-        "dummy",
-        "--num-threads",
-        "1",
-    ]
+    argv = tiny_ppo_argv(
+        *("--run-dir", str(run), "--vec-env", "dummy", "--num-threads", "1"), n_envs=2
+    )
     assert train_main(argv) == 0
     meta = json.loads((run / "meta.json").read_text())
     assert meta["vec_env"] == {"kind": "dummy", "chosen_by": "--vec-env", "num_threads": 1}

@@ -121,18 +121,20 @@ def test_reference_at_the_shipped_settings_gives_zero_error():
         assert e["slip_error_pct"] == 0.0 and e["slip_uncertainty_pct"] == 0.0, e
 
 
+def _reference(scene, acts, seed, levels, overrides=None):
+    """(x* [m], slip work [J]) of the report's reference for ``acts``: the replays at the two
+    ``levels`` (``A.check_levels`` of ``A.levels(...)``, a factor 2 apart), extrapolated."""
+    c, f = [A.replay(scene, acts, seed, s, r, overrides) for s, r in levels]
+    return tuple(A.richardson(c[k], f[k], 2.0) for k in ("xstar", "slip_work"))
+
+
 def test_coarsened_env_errs_more_than_the_shipped_one():
     """One sub-step per tick is further from the reference than the shipped setting (8), in
     the final position and in the slip work."""
     ov = {"episode_steps": 64}
     rec = A.record("default", "eq32-feedback", 0, overrides=ov)
     acts = rec["actions"]
-    c, f = [
-        A.replay("default", acts, 0, s, r, overrides=ov)
-        for s, r in A.check_levels("default", A.levels(8, 2), ov)
-    ]
-    x_ref = A.richardson(c["xstar"], f["xstar"], 2.0)
-    s_ref = A.richardson(c["slip_work"], f["slip_work"], 2.0)
+    x_ref, s_ref = _reference("default", acts, 0, A.check_levels("default", A.levels(8, 2), ov), ov)
     shipped = A.replay("default", acts, 0, overrides=ov)
     _, res = A.shipped_numerics(rolling_env.make("default"))
     coarse = A.replay("default", acts, 0, 1, res, overrides=ov)
@@ -332,9 +334,7 @@ def test_bang_bang_episodes_end_within_the_accuracy_limit(scene):
     for seed in range(12):
         acts = A.bang_bang_actions(seed, steps, 1)[0]
         shipped = A.replay(scene, acts, seed)
-        c, f = [A.replay(scene, acts, seed, s, r) for s, r in levels]
-        x_ref = A.richardson(c["xstar"], f["xstar"], 2.0)
-        s_ref = A.richardson(c["slip_work"], f["slip_work"], 2.0)
+        x_ref, s_ref = _reference(scene, acts, seed, levels)
         err = abs(shipped["xstar"] - x_ref) / tol
         assert err < 0.2, f"{scene} seed {seed}: x* {err:.3f} tolerance from the reference"
         rel = abs(shipped["slip_work"] - s_ref) / s_ref
@@ -353,10 +353,7 @@ def test_a_lighter_light_runner_gets_the_sub_steps_its_ringing_needs():
     tol = env.unwrapped.scene.tolerance
     env.close()
     rec = A.record("light_stiff", "eq32-feedback", 0, overrides=ov)
-    c, f = [
-        A.replay("light_stiff", rec["actions"], 0, s, r, overrides=ov)
-        for s, r in A.check_levels("light_stiff", A.levels(), ov)
-    ]
-    x_ref = A.richardson(c["xstar"], f["xstar"], 2.0)
+    levels = A.check_levels("light_stiff", A.levels(), ov)
+    x_ref, _ = _reference("light_stiff", rec["actions"], 0, levels, ov)
     err = abs(rec["xstar"] - x_ref) / tol
     assert err < 0.13, f"feedback episode {err:.3f} tolerance from the reference"
