@@ -321,47 +321,15 @@ def test_ctrl_c_ends_a_long_compiled_run():
     import signal
     import time
 
+    def simulate(n_sub):
+        args = "simulate --delta 0.7 --eps 0.1 --w 2.5 --omega-n-ratio 5 --periods 2 --n-sub"
+        return args.split() + [str(n_sub)]
+
     # the kernel compiled (or loaded from the cache) first, so that the signal below meets
     # the long call, not the compiler
-    assert (
-        main(
-            [
-                "simulate",
-                "--delta",
-                "0.7",
-                "--eps",
-                "0.1",
-                "--w",
-                "2.5",
-                "--omega-n-ratio",
-                "5",
-                "--n-sub",
-                "1",
-                "--periods",
-                "2",
-            ]
-        )
-        == 0
-    )
+    assert main(simulate(1)) == 0
     proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "rolling_env",
-            "simulate",
-            "--delta",
-            "0.7",
-            "--eps",
-            "0.1",
-            "--w",
-            "2.5",
-            "--omega-n-ratio",
-            "5",
-            "--n-sub",
-            "1000000000",
-            "--periods",
-            "2",
-        ],
+        [sys.executable, "-m", "rolling_env", *simulate(1_000_000_000)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         preexec_fn=_sigint_as_in_a_terminal,

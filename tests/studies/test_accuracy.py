@@ -121,6 +121,19 @@ def test_reference_at_the_shipped_settings_gives_zero_error():
         assert e["slip_error_pct"] == 0.0 and e["slip_uncertainty_pct"] == 0.0, e
 
 
+def test_round_off_slip_work_has_no_relative_error():
+    """A massless runner on an unloaded contact slides nowhere: its slip work is round-off
+    (below 1e-38 J where a sliding episode of the scene dissipates about 1e-8 J), whose
+    relative "error" printed as -100% or +390000%.  The report gives none there and keeps
+    it where the contact slides."""
+    r = A.scene_accuracy("default", overrides={**QUICK, "runner_mass": 0.0}, timing_repeats=1)
+    for e in r["episodes"]:
+        assert abs(e["slip_work_reference"]) < 1e-30, (e["label"], e["slip_work_reference"])
+        assert e["slip_error_pct"] is None and e["slip_uncertainty_pct"] is None, e
+    rows = [ln for ln in A.report([r], "cmd", 1.0).splitlines() if ln.startswith("| random")]
+    assert len(rows) == 1 and "| - | - |" in rows[0], f"round-off slip should print '-': {rows}"
+
+
 def _reference(scene, acts, seed, levels, overrides=None):
     """(x* [m], slip work [J]) of the report's reference for ``acts``: the replays at the two
     ``levels`` (``A.check_levels`` of ``A.levels(...)``, a factor 2 apart), extrapolated."""
