@@ -77,6 +77,15 @@ def register(sub):
         "runner mass x0.5 and x2, load x0.5 and x1.5 where there is one",
     )
     p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="change a scene key for every env of the run, the shipped one and the "
+        "references (repeatable; e.g. --set F_ext=0.05 --set mu=inf): the accuracy of a "
+        "scene of your own without writing its file",
+    )
+    p.add_argument(
         "--agents",
         default=None,
         metavar="RUNS",
@@ -112,6 +121,7 @@ def _command(args) -> str:
             parts.append(flag)
         elif val != default:
             parts.append(f"{flag} {val}")
+    parts += [f"--set {kv}" for kv in args.set]
     if args.out is not None:
         parts.append(f"--out {args.out}")
     return " ".join(parts)
@@ -134,10 +144,21 @@ def _run(args):
     scenes = list_scenes() if args.all else [args.scene]
     if args.agents is not None and not Path(args.agents).is_dir():
         raise ValueError(f"--agents: no such folder {args.agents!r}")
-    overrides = None if args.episode_steps is None else {"episode_steps": args.episode_steps}
+    overrides = scene_keys(args.set, args.variants)
+    if args.episode_steps is not None:
+        if "episode_steps" in overrides:
+            raise ValueError("--set: episode_steps is --episode-steps; give it once")
+        overrides["episode_steps"] = args.episode_steps
+    label = " ".join(args.set) or None
+    overrides = overrides or None
     # every scene and level is built once before any episode runs: a bad value fails at
     # once, naming its flag
     for scene in scenes:
+        for flag, keys in (("scene", {}), ("set", scene_keys(args.set))):
+            try:
+                load_scene(scene, **keys)
+            except ValueError as e:
+                raise ValueError(f"--{flag}: {e}") from None
         try:
             check_scene(scene, overrides)
         except ValueError as e:
@@ -165,6 +186,7 @@ def _run(args):
         episodes_bang_bang=args.episodes_bang_bang,
         seed=args.seed,
         overrides=overrides,
+        label=label,
     )
     human = "\n\n".join(table(r) for r in res["scenes"])
     if out is not None:
@@ -172,3 +194,29 @@ def _run(args):
         human += f"\n\nwrote {out}"
     emit(res if args.all or args.variants else res["scenes"][0], args.json, human)
     return 0
+
+
+def scene_keys(pairs, variants: bool = False) -> dict:
+    """The scene keys of ``--set KEY=VALUE`` pairs, each value read as YAML reads a scene
+    file's (the scene checks keys and ranges when it is built); a pair without ``=``, a key
+    given twice or ``--set`` with ``--variants`` (which scale the scene file's values) is a
+    ValueError naming the flag."""
+    import yaml
+
+    out = {}
+    for kv in pairs:
+        key, sep, value = kv.partition("=")
+        key = key.strip()
+        if not sep or not key or not value.strip():
+            raise ValueError(f"--set must be KEY=VALUE (a scene key and its value), got {kv!r}")
+        if key in out:
+            raise ValueError(f"--set: scene key {key!r} given twice")
+        try:
+            out[key] = yaml.safe_load(value)
+        except yaml.YAMLError:
+            out[key] = value
+    if out and variants:
+        raise ValueError(
+            "--set cannot be combined with --variants (the variants scale the scene file's values)"
+        )
+    return out

@@ -354,17 +354,20 @@ def scene_accuracy(
     }
 
 
-def run(scenes, models=None, variants: bool = False, overrides=None, **kw) -> dict:
+def run(
+    scenes, models=None, variants: bool = False, overrides=None, label=None, **kw
+) -> dict:
     """``scene_accuracy`` of each scene: ``{"scenes": [...], "seconds": total}``;
     ``models`` maps a scene (as given) to its (label, path) pairs of agents; ``variants``
-    runs each scene's held-out variants (``scenes.variants``) instead of the scene."""
+    runs each scene's held-out variants (``scenes.variants``) instead of the scene;
+    ``label`` names a change the ``overrides`` make (reported as a variant's label)."""
     from rolling_env.env.scenes import variants as scene_variants
 
     t = time.perf_counter()
     res = []
     for s in scenes:
         ms = (models or {}).get(s, ())
-        plan = scene_variants(s) if variants else [(None, {})]
+        plan = scene_variants(s) if variants else [(label, {})]
         for label, ov in plan:
             o = {**(overrides or {}), **ov} or None
             res.append(scene_accuracy(s, models=ms, overrides=o, variant=label, **kw))
@@ -438,7 +441,8 @@ def report(results: list[dict], command: str, seconds: float) -> str:
         "tolerances, slip work in % of the reference).  *x\\* error*: |x\\*(shipped) - "
         "x\\*(reference)| / the scene's tolerance; *slip error*: (shipped - reference) / "
         "reference, negative = the shipped env underestimates the wear, `-` where the "
-        "reference has no slip work (infinite friction).  *steps/s*: one env's step loop at "
+        "reference has no slip work (infinite friction) or only round-off.  *steps/s*: one "
+        "env's step loop at "
         "the shipped settings (`rolling_env.make`, pre-recorded actions, fastest of "
         f"{TIMING_REPEATS}); the reference levels' speeds follow.",
         "",
