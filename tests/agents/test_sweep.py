@@ -15,6 +15,7 @@ import subprocess
 import sys
 import threading
 import time
+import uuid
 from pathlib import Path
 
 import pytest
@@ -93,6 +94,7 @@ def ray_head(ray_tmp):
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
+        env=_joined(),
     )
     address = None
     for line in head.stdout:
@@ -110,10 +112,17 @@ def ray_head(ray_tmp):
         head.kill()
 
 
+# the test cluster's token, given to the head and to every driver that joins it (so that
+# the tests neither need nor write ~/.ray/auth_token)
+_TOKEN = uuid.uuid4().hex
+
+
 def _joined(env=None) -> dict:
-    """The environment of a sweep that joins the cluster: Ray protects it with a token
-    (~/.ray/auth_token) that a driver naming an address uses only with RAY_AUTH_MODE=token."""
-    return dict(env or os.environ, RAY_AUTH_MODE="token")
+    """The environment of the test cluster's head and of a sweep that joins it: Ray 2.59 and
+    later protect a cluster with a token, which `ray start --head` takes (since 2.60) only
+    where one exists and a driver naming an address uses only with RAY_AUTH_MODE=token.
+    Ray before 2.59 ignores both variables."""
+    return dict(env or os.environ, RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=_TOKEN)
 
 
 # ------------------------------------------------------------------ bad sweep files
