@@ -17,7 +17,8 @@ def register(sub):
         "a refined reference, and its steps/s",
         description="Run the scene's standard episodes at its shipped settings "
         "(Eq. 32 feedback, Eq. 32 open loop, uniform random actions, bang-bang actions "
-        "(each tick a random corner of the action box), and with --agents "
+        "(each tick a random corner of the action box), one action held throughout, and "
+        "with --agents "
         "one of each trained agent configuration), replay each "
         "action sequence open loop at two refined levels (sub-steps x K and 2K, "
         "grid x G and 2G), extrapolate them (Richardson, assumed second order) "
@@ -44,25 +45,31 @@ def register(sub):
         help="G: the reference levels have G and 2G times the "
         f"shipped cells per contact radius (default {DEFAULT_GRID})",
     )
-    p.add_argument(
-        "--episodes-random",
-        type=positive_int("episodes-random", 0, 100),
-        default=1,
-        help="episodes of uniform random actions (default 1)",
-    )
-    p.add_argument(
-        "--episodes-bang-bang",
-        type=positive_int("episodes-bang-bang", 0, 100),
-        default=1,
-        help="episodes of bang-bang actions, each tick a random corner of the action box "
-        "(load down to N_min or up to N_max, full rolling rate and creep either way; "
-        "default 1)",
-    )
+    for kind, what in (
+        ("random", "uniform random actions"),
+        (
+            "bang-bang",
+            "bang-bang actions, each tick a random corner of the action box (load down to "
+            "N_min or up to N_max, full rolling rate and creep either way)",
+        ),
+        (
+            "constant",
+            "one action held throughout, drawn uniformly from the action box (rolling to "
+            "the stroke's end, then the runner ringing on a stopped contact)",
+        ),
+    ):
+        p.add_argument(
+            f"--episodes-{kind}",
+            type=positive_int(f"episodes-{kind}", 0, 100),
+            default=1,
+            help=f"episodes of {what} (default 1)",
+        )
     p.add_argument(
         "--seed",
         type=positive_int("seed", 0, 2**31 - 1),
         default=0,
-        help="reset seed of every episode and seed of the random and bang-bang actions (default 0)",
+        help="reset seed of every episode and seed of the random, bang-bang and constant "
+        "actions (default 0)",
     )
     p.add_argument(
         "--episode-steps",
@@ -112,6 +119,7 @@ def _command(args) -> str:
         ("--refine-grid", args.refine_grid, DEFAULT_GRID),
         ("--episodes-random", args.episodes_random, 1),
         ("--episodes-bang-bang", args.episodes_bang_bang, 1),
+        ("--episodes-constant", args.episodes_constant, 1),
         ("--seed", args.seed, 0),
         ("--episode-steps", args.episode_steps, None),
         ("--variants", args.variants, False),
@@ -184,6 +192,7 @@ def _run(args):
         grid=args.refine_grid,
         episodes_random=args.episodes_random,
         episodes_bang_bang=args.episodes_bang_bang,
+        episodes_constant=args.episodes_constant,
         seed=args.seed,
         overrides=overrides,
         label=label,

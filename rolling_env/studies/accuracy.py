@@ -6,7 +6,10 @@ open-loop baseline, and ``episodes_random`` episodes of uniform random actions (
 from ``numpy.random.default_rng(seed)``), ``episodes_bang_bang`` episodes of bang-bang actions
 (each tick a random corner of the action box, from their own generator: every other tick on
 average the load drops to N_min, lift-off where N_min = 0, and the rolling rate and the creep
-reverse at full size), and optionally one deterministic episode of each
+reverse at full size), ``episodes_constant`` episodes of one action held throughout (uniform
+in the action box, from a third generator: rolling with creep to the stroke's end, then a
+stopped contact on which the runner rings against the edges' microslip), and optionally one
+deterministic episode of each
 trained agent given (the first seed of each configuration under a runs folder, kind
 ``agent``).  Each action sequence is then replayed open loop,
 so that no feedback can hide a drift, at the shipped settings (timed: steps per second) and at
@@ -42,7 +45,7 @@ ORDER = 2.0  # assumed order of the error in the refinement factor (Richardson)
 DEFAULT_REFINE = 8  # K: sub-steps x K and x 2K at the two reference levels
 DEFAULT_GRID = 4  # G: the grid (resolution) x G and x 2G at the two reference levels
 TIMING_REPEATS = 3  # the shipped replay is timed this often; the fastest run counts
-KINDS = ("eq32-feedback", "eq32-open-loop", "random", "bang-bang", "agent")
+KINDS = ("eq32-feedback", "eq32-open-loop", "random", "bang-bang", "constant", "agent")
 
 
 def shipped_numerics(env) -> tuple[int, float]:
@@ -131,6 +134,18 @@ def bang_bang_actions(seed: int, steps: int, episodes: int) -> list[np.ndarray]:
     return [rng.choice(corners, (steps, 3)) for _ in range(episodes)]
 
 
+def constant_actions(seed: int, steps: int, episodes: int) -> list[np.ndarray]:
+    """``episodes`` sequences of ``steps`` copies of one action, each drawn uniformly from the
+    action box by ``numpy.random.default_rng([seed, 2])`` (a generator of their own, like
+    ``bang_bang_actions``')."""
+    seed = check_int("seed", seed, 0, 2**63 - 1)
+    steps = check_int("steps", steps, 1, 10**8)
+    episodes = check_int("episodes", episodes, 0, 10**6)
+    rng = np.random.default_rng([seed, 2])
+    held = rng.uniform(-1.0, 1.0, (episodes, 3)).astype(np.float32)
+    return [np.tile(a, (steps, 1)) for a in held]
+
+
 def record(
     scene,
     kind: str,
@@ -140,9 +155,9 @@ def record(
     model: str | None = None,
 ) -> dict:
     """One episode of ``kind`` at the shipped settings: its actions (float32, as the
-    controllers give them), final x* [m], total slip work [J] and target [m].  ``random``
-    and ``bang-bang`` play ``actions`` (pre-sampled); ``agent`` the trained ``model`` (an
-    SB3 .zip, loaded by ``rollout.make_controller``, deterministic)."""
+    controllers give them), final x* [m], total slip work [J] and target [m].  ``random``,
+    ``bang-bang`` and ``constant`` play ``actions`` (pre-sampled); ``agent`` the trained
+    ``model`` (an SB3 .zip, loaded by ``rollout.make_controller``, deterministic)."""
     from rolling_env.env.baselines import Eq32Feedback, Eq32OpenLoop
     from rolling_env.env.rollout import make_controller, rollout
 
@@ -151,7 +166,7 @@ def record(
         ctrl = Eq32Feedback.from_env(env)
     elif kind == "eq32-open-loop":
         ctrl = Eq32OpenLoop.from_env(env)
-    elif kind in ("random", "bang-bang"):
+    elif kind in ("random", "bang-bang", "constant"):
         ctrl = _Sequence(actions)
     elif kind == "agent":
         ctrl = make_controller(str(model), env, seed=seed, scene=scene)
@@ -290,6 +305,7 @@ def scene_accuracy(
     seed: int = 0,
     overrides: dict | None = None,
     episodes_bang_bang: int = 1,
+    episodes_constant: int = 1,
     level_factors=None,
     order: float = ORDER,
     timing_repeats: int = TIMING_REPEATS,
@@ -329,6 +345,9 @@ def scene_accuracy(
     for i, acts in enumerate(bang):
         label = "bang-bang" if len(bang) == 1 else f"bang-bang {i + 1}"
         plan.append(("bang-bang", label, {"actions": acts}))
+    for acts in constant_actions(seed, steps, episodes_constant):
+        label = "constant (" + ", ".join(f"{x:+.2f}" for x in acts[0]) + ")"
+        plan.append(("constant", label, {"actions": acts}))
     plan += [("agent", label, {"model": path}) for label, path in models]
 
     episodes = []
@@ -354,9 +373,7 @@ def scene_accuracy(
     }
 
 
-def run(
-    scenes, models=None, variants: bool = False, overrides=None, label=None, **kw
-) -> dict:
+def run(scenes, models=None, variants: bool = False, overrides=None, label=None, **kw) -> dict:
     """``scene_accuracy`` of each scene: ``{"scenes": [...], "seconds": total}``;
     ``models`` maps a scene (as given) to its (label, path) pairs of agents; ``variants``
     runs each scene's held-out variants (``scenes.variants``) instead of the scene;

@@ -92,12 +92,14 @@ def test_json_has_the_documented_keys_and_finite_values(tmp_path, capsys):
         {"sub_steps": 2 * s, "resolution": res},
         {"sub_steps": 4 * s, "resolution": 2 * res},
     ]
+    held = A.constant_actions(3, 32, 1)[0][0]
     assert [e["label"] for e in r["episodes"]] == [
         "eq32-feedback",
         "eq32-open-loop",
         "random 1",
         "random 2",
         "bang-bang",
+        "constant (" + ", ".join(f"{x:+.2f}" for x in held) + ")",
     ]
     for e in r["episodes"]:
         assert EPISODE_KEYS <= set(e), set(e) ^ EPISODE_KEYS
@@ -170,6 +172,7 @@ def test_richardson_second_order():
         (["--scene", "default", "--refine-grid", "0"], "refine-grid must be an integer in"),
         (["--scene", "default", "--episodes-random", "-1"], "episodes-random must be an integer"),
         (["--scene", "default", "--episodes-bang-bang", "x"], "episodes-bang-bang must be an"),
+        (["--scene", "default", "--episodes-constant", "101"], "episodes-constant must be an"),
         (["--scene", "default", "--seed", "-1"], "seed must be an integer in"),
         (["--scene", "default", "--episode-steps", "0"], "episode-steps must be an integer in"),
         (["--scene", "default", "--out", "{dir}/"], "out must be a file path"),
@@ -255,6 +258,8 @@ def test_all_writes_one_report_of_every_scene(tmp_path, capsys, monkeypatch):
                 "0",
                 "--episodes-bang-bang",
                 "0",
+                "--episodes-constant",
+                "0",
                 "--json",
                 "--out",
                 str(out),
@@ -268,7 +273,7 @@ def test_all_writes_one_report_of_every_scene(tmp_path, capsys, monkeypatch):
     text = out.read_text()
     assert text.startswith("# Accuracy") and "## default" in text
     assert "rolling-drive accuracy --all --refine 1 --refine-grid 1" in text
-    assert "--episodes-bang-bang 0" in text, "the report's command must reproduce the run"
+    assert "--episodes-bang-bang 0 --episodes-constant 0" in text, "the command must reproduce it"
 
 
 def test_agents_add_one_episode_per_configuration(tmp_path, capsys):
@@ -286,7 +291,8 @@ def test_agents_add_one_episode_per_configuration(tmp_path, capsys):
     (runs / "td3_seed0").mkdir()  # no model.zip
     argv = ["accuracy", "--scene", "default", "--agents", str(tmp_path / "runs")]
     argv += ["--refine", "1", "--refine-grid", "1", "--episode-steps", "16"]
-    assert main([*argv, "--episodes-random", "0", "--episodes-bang-bang", "0", "--json"]) == 0
+    quiet = ["--episodes-random", "0", "--episodes-bang-bang", "0", "--episodes-constant", "0"]
+    assert main([*argv, *quiet, "--json"]) == 0
     r = json.loads(capsys.readouterr().out)
     eps = {e["label"]: e for e in r["episodes"]}
     assert list(eps) == ["eq32-feedback", "eq32-open-loop", "ppo_seed0", "sac_seed0"], list(eps)
@@ -351,7 +357,8 @@ def test_bang_bang_episodes_play_corners_of_the_action_box_and_keep_the_random_o
         }
         for n_random, n_bang in ((1, 1), (1, 0), (2, 1))
     }
-    assert list(runs[1, 1]) == ["eq32-feedback", "eq32-open-loop", "random", "bang-bang"]
+    assert list(runs[1, 1])[:4] == ["eq32-feedback", "eq32-open-loop", "random", "bang-bang"]
+    assert list(runs[1, 1])[4].startswith("constant (") and len(runs[1, 1]) == 5
     assert runs[1, 1]["random"] == runs[1, 0]["random"]
     assert runs[1, 1]["bang-bang"] == runs[2, 1]["bang-bang"]
     assert runs[2, 1]["random 1"] == runs[1, 1]["random"]
@@ -363,6 +370,26 @@ def test_bang_bang_episodes_play_corners_of_the_action_box_and_keep_the_random_o
     env.reset(seed=0)
     loads = [env.step(a)[4]["N"] for a in rec["actions"]]
     assert min(loads) == 0.0 and max(loads) == pytest.approx(env.unwrapped.scene.N_max), loads
+
+
+def test_constant_episodes_hold_one_action_from_their_own_generator():
+    """A constant episode repeats one action drawn uniformly from the action box, from a
+    generator of its own: the random and bang-bang episodes of a seed are the same with or
+    without it, and a bad count is one error naming it."""
+    acts = A.constant_actions(4, 16, 3)
+    assert len(acts) == 3 and all(a.shape == (16, 3) and a.dtype.name == "float32" for a in acts)
+    for a in acts:
+        assert np.all(a == a[0]) and np.all(np.abs(a[0]) <= 1.0), a[0]
+    assert len({tuple(a[0]) for a in acts}) == 3
+    assert np.array_equal(A.constant_actions(4, 16, 1)[0], acts[0])
+    for args, name in (((0, 5, -1), "episodes"), ((0, 0, 1), "steps"), ((-1, 5, 1), "seed")):
+        with pytest.raises(ValueError, match=name):
+            A.constant_actions(*args)
+    kw = dict(level_factors=((1, 1), (1, 1)), overrides=QUICK, timing_repeats=1)
+    with_c = {e["label"]: e["xstar_shipped"] for e in A.scene_accuracy("default", **kw)["episodes"]}
+    without = A.scene_accuracy("default", episodes_constant=0, **kw)["episodes"]
+    assert all(with_c[e["label"]] == e["xstar_shipped"] for e in without)
+    assert len(with_c) == len(without) + 1
 
 
 @pytest.mark.parametrize("scene", ["default", "loaded", "resonant"])
