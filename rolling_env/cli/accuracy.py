@@ -111,7 +111,9 @@ def register(sub):
 
 def _command(args) -> str:
     """The command line that reproduces the run, for the report's header."""
-    parts = ["rolling-drive accuracy", "--all" if args.all else f"--scene {args.scene}"]
+    from shlex import quote
+
+    parts = ["rolling-drive accuracy", "--all" if args.all else f"--scene {quote(args.scene)}"]
     from rolling_env.studies.accuracy import DEFAULT_GRID, DEFAULT_REFINE
 
     for flag, val, default in (
@@ -128,10 +130,10 @@ def _command(args) -> str:
         if val is True:
             parts.append(flag)
         elif val != default:
-            parts.append(f"{flag} {val}")
-    parts += [f"--set {kv}" for kv in args.set]
+            parts.append(f"{flag} {quote(str(val))}")
+    parts += [f"--set {quote(kv)}" for kv in args.set]
     if args.out is not None:
-        parts.append(f"--out {args.out}")
+        parts.append(f"--out {quote(str(args.out))}")
     return " ".join(parts)
 
 
@@ -157,7 +159,7 @@ def _run(args):
         if "episode_steps" in overrides:
             raise ValueError("--set: episode_steps is --episode-steps; give it once")
         overrides["episode_steps"] = args.episode_steps
-    label = " ".join(args.set) or None
+    changes = " ".join(f"{k}={v}" for k, v in _pairs(args.set)) or None
     overrides = overrides or None
     # every scene and level is built once before any episode runs: a bad value fails at
     # once, naming its flag
@@ -195,7 +197,7 @@ def _run(args):
         episodes_constant=args.episodes_constant,
         seed=args.seed,
         overrides=overrides,
-        label=label,
+        changes=changes,
     )
     human = "\n\n".join(table(r) for r in res["scenes"])
     if out is not None:
@@ -213,11 +215,7 @@ def scene_keys(pairs, variants: bool = False) -> dict:
     import yaml
 
     out = {}
-    for kv in pairs:
-        key, sep, value = kv.partition("=")
-        key = key.strip()
-        if not sep or not key or not value.strip():
-            raise ValueError(f"--set must be KEY=VALUE (a scene key and its value), got {kv!r}")
+    for key, value in _pairs(pairs):
         if key in out:
             raise ValueError(f"--set: scene key {key!r} given twice")
         try:
@@ -228,4 +226,18 @@ def scene_keys(pairs, variants: bool = False) -> dict:
         raise ValueError(
             "--set cannot be combined with --variants (the variants scale the scene file's values)"
         )
+    return out
+
+
+def _pairs(pairs) -> list[tuple[str, str]]:
+    """(key, value) of each ``--set KEY=VALUE``, stripped; a pair without ``=``, key or value
+    is a ValueError naming the flag."""
+    out = []
+    for kv in pairs:
+        key, sep, value = (x.strip() for x in kv.partition("="))
+        if not sep or not key:
+            raise ValueError(f"--set must be KEY=VALUE (a scene key and its value), got {kv!r}")
+        if not value:
+            raise ValueError(f"--set: scene key {key!r} has no value (KEY=VALUE), got {kv!r}")
+        out.append((key, value))
     return out

@@ -311,13 +311,15 @@ def scene_accuracy(
     timing_repeats: int = TIMING_REPEATS,
     models=(),
     variant: str | None = None,
+    changes: str | None = None,
 ) -> dict:
     """The accuracy table of one scene (name, YAML path or dict; see the module docstring).
 
     ``models``: (label, path) pairs of trained agents (SB3 .zip) whose deterministic
     episodes are recorded and replayed like the others (kind ``agent``).  ``variant``: the
-    label of the physics ``overrides`` change (a held-out variant, ``scenes.variants``),
-    reported beside the scene's name.
+    label of the physics ``overrides`` change (a held-out variant, ``scenes.variants``);
+    ``changes``: the label of scene keys a user changed (``--set``); both are reported
+    beside the scene's name.
 
     ``overrides`` apply to every env built (the shipped one and the references), e.g.
     ``{"episode_steps": 64}`` for a quick check.  ``level_factors``: the two reference levels
@@ -361,6 +363,7 @@ def scene_accuracy(
     return {
         "scene": sc.name,
         "variant": variant,
+        "changes": changes,
         "tolerance": sc.tolerance,
         "episode_steps": steps,
         "seed": seed,
@@ -373,26 +376,28 @@ def scene_accuracy(
     }
 
 
-def run(scenes, models=None, variants: bool = False, overrides=None, label=None, **kw) -> dict:
+def run(scenes, models=None, variants: bool = False, overrides=None, changes=None, **kw) -> dict:
     """``scene_accuracy`` of each scene: ``{"scenes": [...], "seconds": total}``;
     ``models`` maps a scene (as given) to its (label, path) pairs of agents; ``variants``
     runs each scene's held-out variants (``scenes.variants``) instead of the scene;
-    ``label`` names a change the ``overrides`` make (reported as a variant's label)."""
+    ``changes`` names the scene keys the ``overrides`` change (``--set``)."""
     from rolling_env.env.scenes import variants as scene_variants
 
     t = time.perf_counter()
     res = []
     for s in scenes:
         ms = (models or {}).get(s, ())
-        plan = scene_variants(s) if variants else [(label, {})]
+        plan = scene_variants(s) if variants else [(None, {})]
         for label, ov in plan:
             o = {**(overrides or {}), **ov} or None
-            res.append(scene_accuracy(s, models=ms, overrides=o, variant=label, **kw))
+            res.append(
+                scene_accuracy(s, models=ms, overrides=o, variant=label, changes=changes, **kw)
+            )
     return {"scenes": res, "seconds": time.perf_counter() - t}
 
 
 def _title(res: dict) -> str:
-    return res["scene"] if not res.get("variant") else f"{res['scene']} {res['variant']}"
+    return " ".join(x for x in (res["scene"], res.get("variant"), res.get("changes")) if x)
 
 
 def agent_models(runs_dir, scene_name: str) -> list[tuple[str, str]]:
@@ -469,6 +474,11 @@ def report(results: list[dict], command: str, seconds: float) -> str:
             "Each section is a held-out variant of a shipped scene: one physics key scaled "
             "(`rolling_env.env.scenes.variants`), every other key and the numerics rule as shipped "
             "(`sub_steps: auto` follows the changed physics; the grid is the scene's).",
+            "",
+        ]
+    if any(r.get("changes") for r in results):
+        lines += [
+            f"Scene keys changed for every env of the run (`--set`): {results[0]['changes']}.",
             "",
         ]
     for res in results:
