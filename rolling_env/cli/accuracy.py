@@ -154,25 +154,22 @@ def _run(args):
     scenes = list_scenes() if args.all else [args.scene]
     if args.agents is not None and not Path(args.agents).is_dir():
         raise ValueError(f"--agents: no such folder {args.agents!r}")
-    overrides = scene_keys(args.set, args.variants)
-    if args.episode_steps is not None:
-        if "episode_steps" in overrides:
-            raise ValueError("--set: episode_steps is --episode-steps; give it once")
-        overrides["episode_steps"] = args.episode_steps
+    keys = scene_keys(args.set, args.variants)
+    if args.episode_steps is not None and "episode_steps" in keys:
+        raise ValueError("--set: episode_steps is --episode-steps; give it once")
+    base = None if args.episode_steps is None else {"episode_steps": args.episode_steps}
+    overrides = {**keys, **(base or {})} or None
     changes = " ".join(f"{k}={v}" for k, v in _pairs(args.set)) or None
-    overrides = overrides or None
     # every scene and level is built once before any episode runs: a bad value fails at
     # once, naming its flag
     for scene in scenes:
-        for flag, keys in (("scene", {}), ("set", scene_keys(args.set))):
+        # the scene as given, then with the --set keys: an error names what caused it
+        for flag, ov in (("scene", base), ("set", overrides))[: 2 if keys else 1]:
             try:
-                load_scene(scene, **keys)
+                load_scene(scene, **(ov or {}))
+                check_scene(scene, ov)
             except ValueError as e:
                 raise ValueError(f"--{flag}: {e}") from None
-        try:
-            check_scene(scene, overrides)
-        except ValueError as e:
-            raise ValueError(f"--scene: {e}") from None
         for flag, factors in (
             ("refine", [(args.refine, 1), (2 * args.refine, 1)]),
             ("refine-grid", [(1, args.refine_grid), (1, 2 * args.refine_grid)]),
@@ -208,20 +205,27 @@ def _run(args):
 
 
 def scene_keys(pairs, variants: bool = False) -> dict:
-    """The scene keys of ``--set KEY=VALUE`` pairs, each value read as YAML reads a scene
-    file's (the scene checks keys and ranges when it is built); a pair without ``=``, a key
-    given twice or ``--set`` with ``--variants`` (which scale the scene file's values) is a
-    ValueError naming the flag."""
+    """The scene keys of ``--set KEY=VALUE`` pairs, each value read as the scene file's loader
+    reads it (``name`` and ``description`` as they are; the scene checks keys and ranges when
+    it is built); a pair without ``=``, a key given twice, a value that is no YAML or
+    ``--set`` with ``--variants`` (which scale the scene file's values) is a ValueError
+    naming the flag."""
     import yaml
+
+    from rolling_env.env.scenes import _UniqueKeyLoader
 
     out = {}
     for key, value in _pairs(pairs):
         if key in out:
             raise ValueError(f"--set: scene key {key!r} given twice")
-        try:
-            out[key] = yaml.safe_load(value)
-        except yaml.YAMLError:
+        if key in ("name", "description"):
             out[key] = value
+            continue
+        try:
+            out[key] = yaml.load(value, Loader=_UniqueKeyLoader)
+        except yaml.YAMLError as e:
+            msg = " ".join(str(e).split())
+            raise ValueError(f"--set: the value of {key!r} is not valid YAML: {msg}") from None
     if out and variants:
         raise ValueError(
             "--set cannot be combined with --variants (the variants scale the scene file's values)"

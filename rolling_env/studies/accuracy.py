@@ -242,8 +242,8 @@ def _level_ratio(level_factors) -> float:
     return rs
 
 
-# slip work below this fraction of mu N_max x tolerance is round-off (a massless runner on an
-# unloaded contact slides nowhere): its relative error is no measure of anything
+# slip work below this fraction of min(mu, 1) N_max x tolerance is round-off (a massless
+# runner on an unloaded contact slides nowhere): its relative error is no measure of anything
 SLIP_ROUNDOFF = 1e-12
 
 
@@ -334,7 +334,7 @@ def scene_accuracy(
     sc = env.unwrapped.scene
     s0, r0 = shipped_numerics(env)
     steps = sc.episode_steps
-    slip_floor = SLIP_ROUNDOFF * sc.mu * sc.N_max * sc.tolerance if math.isfinite(sc.mu) else 0.0
+    slip_floor = SLIP_ROUNDOFF * min(sc.mu, 1.0) * sc.N_max * sc.tolerance
     env.close()
 
     rng = np.random.default_rng(seed)

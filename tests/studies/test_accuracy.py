@@ -35,6 +35,7 @@ EPISODE_KEYS = {
 SCENE_KEYS = {
     "scene",
     "variant",
+    "changes",
     "tolerance",
     "episode_steps",
     "seed",
@@ -126,7 +127,7 @@ def test_reference_at_the_shipped_settings_gives_zero_error():
 def test_round_off_slip_work_has_no_relative_error():
     """A massless runner on an unloaded contact slides nowhere: its slip work is round-off
     (below 1e-38 J where a sliding episode of the scene dissipates about 1e-8 J), whose
-    relative "error" printed as -100% or +390000%.  The report gives none there and keeps
+    relative "error" would read -100% or +390000%.  The report gives none there and keeps
     it where the contact slides."""
     r = A.scene_accuracy("default", overrides={**QUICK, "runner_mass": 0.0}, timing_repeats=1)
     for e in r["episodes"]:
@@ -192,6 +193,9 @@ def test_richardson_second_order():
         (["--scene", "nosuch", "--set", "mu=1"], "--scene: unknown scene 'nosuch'"),
         (["--all", "--variants", "--set", "mu=1"], "--set cannot be combined with --variants"),
         (["--scene", "default", "--set", "episode_steps=8", "--episode-steps", "8"], "give it"),
+        (["--scene", "default", "--set", "stroke_roll=2e-7"], "--set: scene 'default': Eq. 32"),
+        (["--scene", "default", "--set", "randomize={mu: [0.1, 0.3], mu: [0.1, 0.2]}"], "--set"),
+        (["--scene", "default", "--set", "mu=[1"], "--set: the value of 'mu' is not valid YAML"),
     ],
 )
 def test_bad_flags_exit_2_in_one_line_naming_the_flag(argv, name, tmp_path, capsys, monkeypatch):
@@ -236,6 +240,26 @@ def test_set_changes_the_scene_of_every_level(tmp_path, capsys):
     text = out.read_text()
     assert "--set F_ext=0.05 --set mu=inf" in text and "## default F_ext=0.05 mu=inf" in text
     assert "held-out variant" not in text and "changed for every env of the run" in text
+
+
+def test_set_reads_values_as_a_scene_file_does():
+    """Numbers, inf, booleans and mappings are read as the scene file's loader reads them;
+    name and description are taken as written (text YAML would read as a bool or a
+    mapping)."""
+    from rolling_env.cli.accuracy import scene_keys
+
+    got = scene_keys(
+        ["mu=inf", "F_ext = 0.05", "target_both_signs=false", "description=yes: a b", "name=123"]
+    )
+    assert got == {
+        "mu": "inf",
+        "F_ext": 0.05,
+        "target_both_signs": False,
+        "description": "yes: a b",
+        "name": "123",
+    }, got
+    sc = rolling_env.env.scenes.load_scene("default", **got)
+    assert sc.mu == math.inf and sc.F_ext == 0.05 and sc.name == "123", sc
 
 
 def test_report_header_reproduces_a_run_with_spaces_in_its_arguments(tmp_path, capsys):
