@@ -166,7 +166,6 @@ def _run(args):
         # the scene as given, then with the --set keys: an error names what caused it
         for flag, ov in (("scene", base), ("set", overrides))[: 2 if keys else 1]:
             try:
-                load_scene(scene, **(ov or {}))
                 check_scene(scene, ov)
             except ValueError as e:
                 raise ValueError(f"--{flag}: {e}") from None

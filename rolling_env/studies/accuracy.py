@@ -122,26 +122,28 @@ class _Sequence:
         return a, state
 
 
-def bang_bang_actions(seed: int, steps: int, episodes: int) -> list[np.ndarray]:
-    """``episodes`` sequences of ``steps`` bang-bang actions (each component -1 or +1, drawn
-    with equal odds) from ``numpy.random.default_rng([seed, 1])``: a generator of their own,
-    so that adding them leaves the uniform random episodes of ``seed`` as they were."""
+def _stream(seed, steps, episodes, kind: int):
+    """The checked counts and the generator ``default_rng([seed, kind])`` of one kind of
+    pre-sampled episode: a stream of its own, so that adding episodes of one kind leaves the
+    others of ``seed`` (the uniform random ones from ``default_rng(seed)``) as they were."""
     seed = check_int("seed", seed, 0, 2**63 - 1)
     steps = check_int("steps", steps, 1, 10**8)
     episodes = check_int("episodes", episodes, 0, 10**6)
-    rng = np.random.default_rng([seed, 1])
+    return np.random.default_rng([seed, kind]), steps, episodes
+
+
+def bang_bang_actions(seed: int, steps: int, episodes: int) -> list[np.ndarray]:
+    """``episodes`` sequences of ``steps`` bang-bang actions (each component -1 or +1, drawn
+    with equal odds) from ``numpy.random.default_rng([seed, 1])`` (``_stream``)."""
+    rng, steps, episodes = _stream(seed, steps, episodes, 1)
     corners = np.array([-1.0, 1.0], dtype=np.float32)
     return [rng.choice(corners, (steps, 3)) for _ in range(episodes)]
 
 
 def constant_actions(seed: int, steps: int, episodes: int) -> list[np.ndarray]:
     """``episodes`` sequences of ``steps`` copies of one action, each drawn uniformly from the
-    action box by ``numpy.random.default_rng([seed, 2])`` (a generator of their own, like
-    ``bang_bang_actions``')."""
-    seed = check_int("seed", seed, 0, 2**63 - 1)
-    steps = check_int("steps", steps, 1, 10**8)
-    episodes = check_int("episodes", episodes, 0, 10**6)
-    rng = np.random.default_rng([seed, 2])
+    action box by ``numpy.random.default_rng([seed, 2])`` (``_stream``)."""
+    rng, steps, episodes = _stream(seed, steps, episodes, 2)
     held = rng.uniform(-1.0, 1.0, (episodes, 3)).astype(np.float32)
     return [np.tile(a, (steps, 1)) for a in held]
 

@@ -194,7 +194,7 @@ def test_richardson_second_order():
         (["--all", "--variants", "--set", "mu=1"], "--set cannot be combined with --variants"),
         (["--scene", "default", "--set", "episode_steps=8", "--episode-steps", "8"], "give it"),
         (["--scene", "default", "--set", "stroke_roll=2e-7"], "--set: scene 'default': Eq. 32"),
-        (["--scene", "default", "--set", "randomize={mu: [0.1, 0.3], mu: [0.1, 0.2]}"], "--set"),
+        (["--scene", "default", "--set", "randomize={mu: [0.1, 0.3], mu: [0.1, 0.2]}"], "dup"),
         (["--scene", "default", "--set", "mu=[1"], "--set: the value of 'mu' is not valid YAML"),
     ],
 )
