@@ -574,7 +574,7 @@ def test_a_batch_beyond_the_machine_memory_names_num_envs():
     with pytest.raises(
         ValueError,
         match=r"^num_envs = 1000000000000 envs x .* MiB of cell "
-        r"state each \(resolution = 16.0, grid_levels = 4, "
+        r"state each \(resolution = 32.0, grid_levels = 4, "
         r"stroke_roll",
     ):
         BatchCore(10**12)

@@ -241,7 +241,9 @@ def _tick_out(st, out, state, EG, a, d, stuck, mu):
     if mu is None or a == 0.0:
         out[OUT_STICK] = 1.0 if a > 0.0 else 0.0
     else:
-        out[OUT_STICK] = min(stuck / (2.0 * a), 1.0)
+        # the cells' overlaps sum to 2a only to round-off: a wholly stuck contact reads 1
+        f = stuck / (2.0 * a)
+        out[OUT_STICK] = 1.0 if f > 1.0 - 1e-12 else f
     if not (
         math.isfinite(T1) and math.isfinite(v1) and math.isfinite(xs) and math.isfinite(slip_tick)
     ):
