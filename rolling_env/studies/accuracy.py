@@ -46,6 +46,14 @@ DEFAULT_REFINE = 8  # K: sub-steps x K and x 2K at the two reference levels
 DEFAULT_GRID = 4  # G: the grid (resolution) x G and x 2G at the two reference levels
 TIMING_REPEATS = 3  # the shipped replay is timed this often; the fastest run counts
 KINDS = ("eq32-feedback", "eq32-open-loop", "random", "bang-bang", "constant", "agent")
+#: the env's accuracy targets (final x* in tolerances, slip work in %): a reference whose two
+#: levels differ by more cannot tell whether an episode meets them
+TARGET_XSTAR_TOL = 0.1
+TARGET_SLIP_PCT = 2.0
+UNCERTAIN_NOTE = (
+    "reference uncertain by more than the targets (0.1 tolerance, 2% slip work): its two "
+    "levels disagree, so the error is only a rough size; refine it (--refine-grid 16)"
+)
 
 
 def shipped_numerics(env) -> tuple[int, float]:
@@ -255,6 +263,21 @@ def _rel_pct(value: float, ref: float, floor: float = 0.0) -> float | None:
     return (value - ref) / abs(ref) * 100.0
 
 
+def _uncertain(x_unc_tol: float, slip_unc_pct: float | None) -> bool:
+    """The reference's levels differ by more than the targets (``TARGET_XSTAR_TOL``,
+    ``TARGET_SLIP_PCT``)."""
+    return any(
+        _uncertain_parts({"xstar_uncertainty_tol": x_unc_tol, "slip_uncertainty_pct": slip_unc_pct})
+    )
+
+
+def _uncertain_parts(e: dict) -> tuple[bool, bool]:
+    """Whether an episode's reference is uncertain beyond the target in x* and in the slip
+    work."""
+    s = e["slip_uncertainty_pct"]
+    return e["xstar_uncertainty_tol"] > TARGET_XSTAR_TOL, s is not None and s > TARGET_SLIP_PCT
+
+
 def episode_result(
     kind: str,
     label: str,
@@ -291,6 +314,7 @@ def episode_result(
         "slip_work_reference": s_ref,
         "slip_error_pct": slip_err,
         "slip_uncertainty_pct": slip_unc,
+        "reference_uncertain": _uncertain(abs(f["xstar"] - c["xstar"]) / tolerance, slip_unc),
         "steps_per_s": shipped["steps_per_s"],
         "levels": [
             {"xstar": r["xstar"], "slip_work": r["slip_work"], "steps_per_s": r["steps_per_s"]}
@@ -420,7 +444,10 @@ def _f(x, fmt: str, unit: str = "", width: int = 0) -> str:
 
 
 def _unc(e: dict) -> str:
-    return f"{e['xstar_uncertainty_tol']:.3g} tol, {_f(e['slip_uncertainty_pct'], '.2g', '%')}"
+    mark = " *" if e["reference_uncertain"] else ""
+    return (
+        f"{e['xstar_uncertainty_tol']:.3g} tol, {_f(e['slip_uncertainty_pct'], '.2g', '%')}{mark}"
+    )
 
 
 def table(res: dict) -> str:
@@ -445,6 +472,8 @@ def table(res: dict) -> str:
             f"{_f(e['slip_error_pct'], '+.2f', width=11)} {e['steps_per_s']:9.0f}"
             f"   {_unc(e)}"
         )
+    if any(e["reference_uncertain"] for e in res["episodes"]):
+        lines.append(f"  * {UNCERTAIN_NOTE}")
     if not all(e["replay_exact"] for e in res["episodes"]):
         lines.append("  WARNING: a replay at the shipped settings differs from its recording")
     lines.append(f"  [{res['seconds']:.1f} s]")
@@ -500,13 +529,17 @@ def report(results: list[dict], command: str, seconds: float) -> str:
         ]
         for e in res["episodes"]:
             speeds = " | ".join(f"{lev['steps_per_s']:.0f}" for lev in e["levels"])
+            mx, ms = (" \\*" if u else "" for u in _uncertain_parts(e))
             lines.append(
                 f"| {e['label']} | {e['xstar_error_tol']:.3g} | "
-                f"{e['xstar_uncertainty_tol']:.2g} | {_f(e['slip_error_pct'], '+.1f', '%')} | "
-                f"{_f(e['slip_uncertainty_pct'], '.2g', '%')} | "
+                f"{e['xstar_uncertainty_tol']:.2g}{mx} | "
+                f"{_f(e['slip_error_pct'], '+.1f', '%')} | "
+                f"{_f(e['slip_uncertainty_pct'], '.2g', '%')}{ms} | "
                 f"{e['xstar_shipped']:.5e} | {e['xstar_reference']:.5e} | "
                 f"{e['slip_work_reference']:.4e} | {e['steps_per_s']:.0f} | {speeds} |"
             )
+        if any(e["reference_uncertain"] for e in res["episodes"]):
+            lines += ["", f"\\* {UNCERTAIN_NOTE}."]
         if not all(e["replay_exact"] for e in res["episodes"]):
             lines += [
                 "",
