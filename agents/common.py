@@ -194,7 +194,7 @@ def _sub_steps_text(fields: dict) -> str:
 
 def numerics_note(trained: dict, now: dict) -> str:
     """What differs between two ``scene_fields`` in ``NUMERICS_KEYS`` and ``REWARD_KEYS``, for
-    the tables: ``sub_steps 8 (now auto: 23), resolution 16 (now 32)``; "" where nothing
+    the tables: ``sub_steps 8 (now auto: 46), resolution 16 (now 32)``; "" where nothing
     does."""
     parts = []
     if any(trained.get(k) != now.get(k) for k in ("sub_steps", "n_sub")):

@@ -168,7 +168,7 @@ class RollingDriveEnv(gym.Env):
       cells per contact radius (46 sub-steps per tick from its accuracy).  At 16 the scene's
       own episodes ended within 0.1 tolerance of the converged runner position, but the
       same scene with one key changed (mu 1 or infinite, a load on the runner, longer
-      ticks, a lighter runner) ended up to 0.74 tolerance off; at 32 within 0.24.
+      ticks, a lighter runner) ended up to 0.74 tolerance off; at 32 within 0.23.
     """
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 30}

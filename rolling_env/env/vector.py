@@ -30,8 +30,8 @@ so switching changes no result.  ``num_threads=1`` always runs the serial kernel
 threaded kernel on k threads.  The thread count is set for each threaded step only and
 restored after it (numba keeps it per calling thread); the threading layer and its wait policy
 stay numba's (``NUMBA_THREADING_LAYER``, ``OMP_WAIT_POLICY``: nothing here sets them).  Below
-``PARALLEL_MIN_ENVS`` envs the default runs the serial kernel only: the threads never paid
-there on the 2-core machine (0.61-0.63x at 1 env, 0.90-0.98x at 4).
+``PARALLEL_MIN_ENVS`` envs the default runs the serial kernel only, set where the threads
+paid little on the 2-core machine (docs/performance.md has the measurements).
 """
 
 from __future__ import annotations

@@ -51,8 +51,9 @@ KINDS = ("eq32-feedback", "eq32-open-loop", "random", "bang-bang", "constant", "
 TARGET_XSTAR_TOL = 0.1
 TARGET_SLIP_PCT = 2.0
 UNCERTAIN_NOTE = (
-    "reference uncertain by more than the targets (0.1 tolerance, 2% slip work): its two "
-    "levels disagree, so the error is only a rough size; refine it (--refine-grid 16)"
+    f"reference uncertain by more than the targets ({TARGET_XSTAR_TOL:g} tolerance, "
+    f"{TARGET_SLIP_PCT:g}% slip work): its two levels disagree, so the error is only a rough "
+    "size; refine the reference (a larger --refine-grid, or --refine)"
 )
 
 
@@ -263,14 +264,6 @@ def _rel_pct(value: float, ref: float, floor: float = 0.0) -> float | None:
     return (value - ref) / abs(ref) * 100.0
 
 
-def _uncertain(x_unc_tol: float, slip_unc_pct: float | None) -> bool:
-    """The reference's levels differ by more than the targets (``TARGET_XSTAR_TOL``,
-    ``TARGET_SLIP_PCT``)."""
-    return any(
-        _uncertain_parts({"xstar_uncertainty_tol": x_unc_tol, "slip_uncertainty_pct": slip_unc_pct})
-    )
-
-
 def _uncertain_parts(e: dict) -> tuple[bool, bool]:
     """Whether an episode's reference is uncertain beyond the target in x* and in the slip
     work."""
@@ -299,7 +292,7 @@ def episode_result(
     slip_unc = None  # the levels' difference relative to the reference
     if slip_err is not None:
         slip_unc = abs(f["slip_work"] - c["slip_work"]) / abs(s_ref) * 100.0
-    return {
+    out = {
         "kind": kind,
         "label": label,
         "steps": len(rec["actions"]),
@@ -314,13 +307,15 @@ def episode_result(
         "slip_work_reference": s_ref,
         "slip_error_pct": slip_err,
         "slip_uncertainty_pct": slip_unc,
-        "reference_uncertain": _uncertain(abs(f["xstar"] - c["xstar"]) / tolerance, slip_unc),
+        "reference_uncertain": False,  # below, from the two uncertainties
         "steps_per_s": shipped["steps_per_s"],
         "levels": [
             {"xstar": r["xstar"], "slip_work": r["slip_work"], "steps_per_s": r["steps_per_s"]}
             for r in refs
         ],
     }
+    out["reference_uncertain"] = any(_uncertain_parts(out))
+    return out
 
 
 def scene_accuracy(
@@ -444,9 +439,9 @@ def _f(x, fmt: str, unit: str = "", width: int = 0) -> str:
 
 
 def _unc(e: dict) -> str:
-    mark = " *" if e["reference_uncertain"] else ""
+    mx, ms = (" *" if u else "" for u in _uncertain_parts(e))
     return (
-        f"{e['xstar_uncertainty_tol']:.3g} tol, {_f(e['slip_uncertainty_pct'], '.2g', '%')}{mark}"
+        f"{e['xstar_uncertainty_tol']:.3g} tol{mx}, {_f(e['slip_uncertainty_pct'], '.2g', '%')}{ms}"
     )
 
 

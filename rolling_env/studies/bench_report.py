@@ -98,9 +98,10 @@ def _kernel_section(rows, asy) -> list:
             f"({asy['finite_mu']['fraction']:.2f} of the limit), "
             f"{asy['infinite_mu']['cell_updates_per_s'] / 1e6:.0f} M/s without "
             f"({asy['infinite_mu']['fraction']:.2f}).  The scenes' contacts span at most "
-            "2 resolution + 2 cells (66 at 32 cells per radius, 258 at 128), so there the "
-            "per-tick work (action mapping, load change, observation) and the edge cells, "
-            "integrated one by one exactly through their entry and exit, take a larger share.",
+            "2 resolution + 2 cells (66 at 32 cells per radius, 258 at 128); besides the "
+            "inner cells their ticks pay the per-tick work (action mapping, load change, "
+            "observation) and the edge cells, integrated one by one exactly through their "
+            "entry and exit.",
         ]
     return L
 

@@ -194,6 +194,27 @@ def test_train_refuses_a_used_run_folder(tmp_path, capsys):
     assert (good / "model.zip").exists()
 
 
+def _signal_after_first_evaluation(proc, run, sig, timeout=300.0):
+    """Send ``sig`` to the training child once it has written its first evaluation to
+    ``run`` (seconds usually; ``timeout`` is generous for a loaded 2-core machine).  A child
+    that ended early or never evaluated fails the test with its stderr, and is killed rather
+    than left training."""
+    deadline = time.time() + timeout
+    while not (run / "evaluations.npz").exists() and time.time() < deadline:
+        if proc.poll() is not None:
+            break
+        time.sleep(0.5)
+    if proc.poll() is not None or not (run / "evaluations.npz").exists():
+        if proc.poll() is None:
+            proc.kill()
+        err = proc.communicate()[1]
+        err = err.decode(errors="replace") if isinstance(err, bytes) else err
+        pytest.fail(
+            f"no evaluation in {run} within {timeout:g} s (exit {proc.returncode}): {err[-2000:]}"
+        )
+    proc.send_signal(sig)
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_interrupted_training_leaves_loadable_checkpoint(tmp_path, sig):
     proc = subprocess.Popen(
@@ -204,14 +225,7 @@ def test_interrupted_training_leaves_loadable_checkpoint(tmp_path, sig):
         preexec_fn=_sigint_as_in_a_terminal,
     )
     run = tmp_path / "run"
-    deadline = time.time() + 300  # generous for a loaded 2-core machine; usually seconds
-    while not (run / "evaluations.npz").exists() and time.time() < deadline:
-        if proc.poll() is not None:
-            break
-        time.sleep(0.5)
-    assert proc.poll() is None, f"training ended before the signal: {proc.communicate()[1][-2000:]}"
-    assert (run / "evaluations.npz").exists(), "no evaluation written within 300 s"
-    proc.send_signal(sig)
+    _signal_after_first_evaluation(proc, run, sig)
     _, err = proc.communicate(timeout=120)  # drains the pipes; the child's stderr for the message
     assert proc.returncode == 128 + sig, (
         f"an interrupted run must exit 128 + signal, got {proc.returncode}; its stderr ends: "
@@ -732,14 +746,7 @@ def test_overwrite_stopped_by_sigterm_keeps_both_runs(tmp_path):
         text=True,
     )
     staging = tmp_path / "run.overwrite"
-    deadline = time.time() + 300  # generous for a loaded 2-core machine; usually seconds
-    while not (staging / "evaluations.npz").exists() and time.time() < deadline:
-        if proc.poll() is not None:
-            break
-        time.sleep(0.5)
-    assert proc.poll() is None, f"training ended before the signal: {proc.communicate()[1][-2000:]}"
-    assert (staging / "evaluations.npz").exists(), "no evaluation written within 300 s"
-    proc.send_signal(signal.SIGTERM)
+    _signal_after_first_evaluation(proc, staging, signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 128 + signal.SIGTERM, (proc.returncode, err[-2000:])
     assert str(staging) in err and "is kept" in err, err[-2000:]

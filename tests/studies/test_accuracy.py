@@ -160,15 +160,45 @@ def test_a_reference_uncertain_by_more_than_the_targets_is_marked():
     assert not by["eq32-feedback"]["reference_uncertain"]
     md = A.report([r], "cmd", 1.0)
     rows = [ln for ln in md.splitlines() if ln.startswith("| bang-bang |")]
-    assert len(rows) == 1 and " \\* |" in rows[0], rows
+    assert len(rows) == 1, rows
+    cells = [c.strip() for c in rows[0].strip().strip("|").split("|")]
+    # x* uncertainty (column 3) marked, slip uncertainty (column 5, none here) not
+    assert cells[2].endswith("\\*") and cells[4] == "-", cells
     assert "reference uncertain by more than the targets" in md and "--refine-grid" in md
     assert not [ln for ln in md.splitlines() if ln.startswith("| eq32") and "\\*" in ln]
     txt = A.table(r).splitlines()
     bb = [ln for ln in txt if ln.strip().startswith("bang-bang")]
-    assert len(bb) == 1 and bb[0].endswith(" *"), txt
+    assert len(bb) == 1 and " tol *, -" in bb[0], txt
     assert any("--refine-grid" in ln for ln in txt), txt
-    assert A._uncertain(0.05, 2.5) and A._uncertain(0.15, None) and A._uncertain(0.15, 0.1)
-    assert not A._uncertain(0.05, 1.9) and not A._uncertain(0.1, 2.0)
+
+
+def test_slip_work_levels_apart_by_more_than_2_percent_mark_the_slip_column():
+    """The rule on hand-made levels: x* levels 0.05 tolerance apart and slip work 3% apart
+    mark the slip uncertainty only; 0.1 tolerance and 2% exactly are within the targets."""
+    rec = {"actions": np.zeros((4, 3), np.float32), "xstar": 0.0, "slip_work": 1.0, "target": 0.0}
+    shipped = {"xstar": 0.0, "slip_work": 1.0, "steps_per_s": 1.0}
+
+    def result(dx_tol, slip_coarse):
+        refs = [
+            {"xstar": 0.0, "slip_work": slip_coarse, "steps_per_s": 1.0},
+            {"xstar": dx_tol * 1e-8, "slip_work": 1.0, "steps_per_s": 1.0},
+        ]
+        return A.episode_result("random", "random", rec, shipped, refs, 2.0, 2.0, 1e-8)
+
+    e = result(0.05, 0.97)
+    assert e["reference_uncertain"] and A._uncertain_parts(e) == (False, True), e
+    res = {"scene": "s", "variant": None, "changes": None, "tolerance": 1e-8, "seed": 0}
+    res |= {"episode_steps": 4, "shipped": {"sub_steps": 1, "resolution": 1.0}}
+    res |= {"levels": [{"sub_steps": 8, "resolution": 4.0}] * 2, "order": 2.0, "ratio": 2.0}
+    res |= {"episodes": [e], "seconds": 0.0}
+    row = [ln for ln in A.report([res], "cmd", 1.0).splitlines() if ln.startswith("| random")]
+    cells = [c.strip() for c in row[0].strip().strip("|").split("|")]
+    assert not cells[2].endswith("\\*") and cells[4].endswith("% \\*"), cells
+    parts = A._uncertain_parts  # exactly at the targets is within them
+    assert parts({"xstar_uncertainty_tol": 0.1, "slip_uncertainty_pct": 2.0}) == (False, False)
+    assert parts({"xstar_uncertainty_tol": 0.1001, "slip_uncertainty_pct": None}) == (True, False)
+    assert not result(0.099, 0.985)["reference_uncertain"]
+    assert A._uncertain_parts(result(0.11, 1.0)) == (True, False)
 
 
 def _reference(scene, acts, seed, levels, overrides=None):
