@@ -307,7 +307,6 @@ def episode_result(
         "slip_work_reference": s_ref,
         "slip_error_pct": slip_err,
         "slip_uncertainty_pct": slip_unc,
-        "reference_uncertain": False,  # below, from the two uncertainties
         "steps_per_s": shipped["steps_per_s"],
         "levels": [
             {"xstar": r["xstar"], "slip_work": r["slip_work"], "steps_per_s": r["steps_per_s"]}
