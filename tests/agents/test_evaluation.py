@@ -405,10 +405,10 @@ def test_numerics_of_a_recorded_scene_are_completed_and_described():
     sub-steps they resolve to."""
     from agents.common import completed_fields, numerics_note, scene_fields
 
-    now = scene_fields("heavy_inf_friction")
-    n = rolling_env.env.scenes.load_scene("heavy_inf_friction").n_sub
+    now = scene_fields("light_stiff")
+    n = rolling_env.env.scenes.load_scene("light_stiff").n_sub
     assert now["sub_steps"] == "auto" and now["n_sub"] == n and now["accuracy"] == 0.01, now
-    assert now["resolution"] == 64, "the notes below assume 64 cells per radius"
+    assert now["resolution"] == 128, "the notes below assume 128 cells per radius"
     assert now["grid_levels"] == 4, "the notes below assume 4 grid levels"
     old = {k: v for k, v in now.items() if k not in ("accuracy", "n_sub")}
     before_levels = {k: v for k, v in old.items() if k != "grid_levels"}
@@ -424,7 +424,7 @@ def test_numerics_of_a_recorded_scene_are_completed_and_described():
     assert numerics_note(completed_fields(dict(now)), now) == ""
     assert numerics_note(
         completed_fields(dict(old, sub_steps=n + 1, resolution=32.0, accuracy=0.05)), now
-    ) == (f"sub_steps {n + 1} (now auto: {n}), resolution 32 (now 64), accuracy 0.05 (now 0.01)")
+    ) == (f"sub_steps {n + 1} (now auto: {n}), resolution 32 (now 128), accuracy 0.05 (now 0.01)")
 
 
 def test_a_run_trained_on_other_numerics_is_evaluated_and_marked(trained_run, tmp_path, capsys):
@@ -450,10 +450,12 @@ def test_a_run_trained_on_other_numerics_is_evaluated_and_marked(trained_run, tm
             n_sub=None,
         )
     sc = rolling_env.env.scenes.load_scene(str(scene))
-    assert sc.sub_steps == "auto" and sc.n_sub != 4 and sc.resolution == 64
+    assert sc.sub_steps == "auto" and sc.n_sub != 4 and sc.resolution != 12
     out = tmp_path / "out"
     assert evaluate_main(_eval_argv(scene, runs=tmp_path / "runs", out=out)) == 0
-    note = f"sub_steps 4 (now auto: {sc.n_sub}), resolution 12 (now 64)"
+    note = f"sub_steps 4 (now auto: {sc.n_sub}), resolution 12 (now {sc.resolution:g})"
+    if sc.accuracy != 0.01:  # recorded before the key existed: its default, 0.01
+        note += f", accuracy 0.01 (now {sc.accuracy:g})"
     err = capsys.readouterr().err
     assert err.count("trained on other numerics or reward weights") == 2 and note in err, err
     with open(out / "comparison.csv") as f:

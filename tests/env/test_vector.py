@@ -571,10 +571,11 @@ def test_gymnasium_vector_env_needs_a_reset_before_step_like_sync():
 def test_a_batch_beyond_the_machine_memory_names_num_envs():
     """numpy's "Unable to allocate 7.9 PiB" named neither num_envs nor the scene keys that
     size an env's cells; checked before anything is allocated."""
+    res = rolling_env.env.scenes.load_scene("default").resolution
     with pytest.raises(
         ValueError,
         match=r"^num_envs = 1000000000000 envs x .* MiB of cell "
-        r"state each \(resolution = 32.0, grid_levels = 4, "
+        rf"state each \(resolution = {res}, grid_levels = 4, "
         r"stroke_roll",
     ):
         BatchCore(10**12)
