@@ -274,8 +274,8 @@ def test_converge_env_rows_infinite_friction_and_grid_line():
     """``converge.env_rows`` on heavy_inf_friction: x* lines only (no slip work with infinite
     friction); the sub-steps-and-grid line's factor-1 point is the sub-step line's shipped
     point; the shipped settings are within 0.1 tolerance and the worst x* error falls as
-    both are refined (the grid's error on the random episode: about halved per halving
-    from half the shipped grid, at least a third lower)."""
+    both are refined, irregularly (the infinite-friction grid error of the random episode),
+    at least tenfold from half to four times the shipped settings."""
     rows = converge.env_rows("heavy_inf_friction", repeats=1)
     qs = {r["quantity"] for r in rows}
     assert qs == {"env_x:heavy_inf_friction", "env_x_grid:heavy_inf_friction"}, qs
@@ -284,7 +284,7 @@ def test_converge_env_rows_infinite_friction_and_grid_line():
     grid = {r["value"]: r["error"] for r in rows if r["refine"] == "sub_steps+grid"}
     assert sorted(grid) == sorted(converge.ENV_BOTH_FACTORS)
     assert grid[1] < 0.1, f"shipped settings beyond 0.1 tolerance: {grid}"
-    assert grid[2] < grid[1] < grid[0.5] and grid[1] < 0.67 * grid[0.5], (
+    assert grid[4] < grid[2] < grid[1] < grid[0.5] and grid[4] < 0.1 * grid[0.5], (
         f"x* error does not fall with the grid: {grid}"
     )
 
