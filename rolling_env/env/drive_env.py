@@ -169,14 +169,16 @@ class RollingDriveEnv(gym.Env):
       own episodes ended within 0.1 tolerance of the converged runner position, but the
       same scene with one key changed (mu 1 or infinite, a load on the runner, longer
       ticks, a lighter runner) ended up to 0.74 tolerance off; at 32 within 0.23.
-    * v0, finer grids at the same sub-step (same id, action mapping, observations, reward
-      definition and scene physics; different transitions on ``default`` (and its
-      randomised family), ``loaded`` and ``heavy_inf_friction``): ``default`` and
-      ``loaded`` take 48 cells per contact radius and ``heavy_inf_friction`` 128, each with
-      ``accuracy: 0.04`` (35, 35 and 29 sub-steps per tick: sub-steps as long as before, or
-      longer by a third).  With one key changed, ``default`` ended up to 0.23 tolerance from
-      the converged runner position at 32 (0.17 at 48) and ``loaded`` up to 0.13 (0.05);
-      ``heavy_inf_friction``'s bang-bang episodes up to 0.11 at 64 (0.09 at 128).
+    * v0, finer grids (same id, action mapping, observations, reward definition and scene
+      physics; different transitions on ``default`` (and its randomised family), ``loaded``
+      and ``heavy_inf_friction``): ``default`` and ``loaded`` take 48 cells per contact
+      radius with ``accuracy: 0.02`` (49 sub-steps per tick, as long as the 46 they took at
+      32 cells); ``heavy_inf_friction`` takes 256 at its 29 sub-steps (with infinite
+      friction "auto" counts the patch travel in cells of at least a_max / 64).  With one
+      key changed, ``default`` ended up to 0.23 tolerance from the converged runner
+      position at 32 cells (0.17 at 48, mu = inf; the others within 0.07) and ``loaded`` up
+      to 0.13; ``heavy_inf_friction``'s bang-bang episodes (reset seeds 0-2) up to 0.49 at
+      64 cells, 0.27 at 128 and 0.10 at 256.
     """
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 30}
