@@ -174,11 +174,13 @@ class RollingDriveEnv(gym.Env):
       and ``heavy_inf_friction``): ``default`` and ``loaded`` take 48 cells per contact
       radius with ``accuracy: 0.02`` (49 sub-steps per tick, as long as the 46 they took at
       32 cells); ``heavy_inf_friction`` takes 256 at its 29 sub-steps (with infinite
-      friction "auto" counts the patch travel in cells of at least a_max / 64).  With one
-      key changed, ``default`` ended up to 0.23 tolerance from the converged runner
+      friction "auto" counts the patch travel in cells of at least a_max / 64, which also
+      gives any infinite-friction scene above 64 cells per radius fewer sub-steps).  With
+      one key changed, ``default`` ended up to 0.23 tolerance from the converged runner
       position at 32 cells (0.17 at 48, mu = inf; the others within 0.07) and ``loaded`` up
-      to 0.13; ``heavy_inf_friction``'s bang-bang episodes (reset seeds 0-2) up to 0.49 at
-      64 cells, 0.27 at 128 and 0.10 at 256.
+      to 0.13 (at 48 within 0.07 but mu = inf, 0.20, and ticks twice as long, 0.13);
+      ``heavy_inf_friction``'s bang-bang episodes (reset seeds 0-2) up to 0.49 at 64 cells,
+      0.27 at 128 and 0.10 at 256.
     """
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 30}

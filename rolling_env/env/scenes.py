@@ -85,7 +85,8 @@ EPISODE_STEPS_MAX = 10**8
 # "auto" sub-steps (``auto_sub_steps``): the episode's slip work and runner displacement are
 # off by at most about C_TRAVEL x (cells the patch crosses per sub-step)^2 with finite
 # friction (the trailing edge's cells, each charged from the onset of its sliding),
-# C_TRAVEL_STICK x that with infinite friction, and by about C_RUNNER x (omega_n dt)^2 for a
+# C_TRAVEL_STICK x that with infinite friction (counting cells of at least a_max /
+# STICK_CELLS), and by about C_RUNNER x (omega_n dt)^2 for a
 # free runner (omega_n on the stuck contact at N_max).  Upper bounds measured on the shipped
 # scenes' episodes (bang-bang actions, which reverse the rolling at full rate and change the
 # load every tick, set C_TRAVEL) and their held-out variants (light_stiff's runner at half
@@ -94,8 +95,8 @@ C_TRAVEL = 0.02
 C_TRAVEL_STICK = 0.002
 # With infinite friction the patch travel counts cells of at least a_max / STICK_CELLS: the
 # walk is exact and no slip work is charged, so cells finer than that need no shorter
-# sub-steps (measured: heavy_inf_friction at 128 and 256 cells per radius and default with
-# mu = inf at 48 end their episodes as far off at the sub-steps of 64 cells as at twice them).
+# sub-steps (measured: heavy_inf_friction at 128 and 256 cells per radius ends its episodes
+# as far off at the sub-steps of 64 cells as at twice them).
 STICK_CELLS = 64
 C_RUNNER = 1.0
 AUTO_SUB_STEPS_MAX = 4096

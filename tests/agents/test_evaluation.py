@@ -451,11 +451,10 @@ def test_a_run_trained_on_other_numerics_is_evaluated_and_marked(trained_run, tm
         )
     sc = rolling_env.env.scenes.load_scene(str(scene))
     assert sc.sub_steps == "auto" and sc.n_sub != 4 and sc.resolution != 12
+    assert sc.accuracy == 0.01, "the note below assumes the default accuracy the runs recorded"
     out = tmp_path / "out"
     assert evaluate_main(_eval_argv(scene, runs=tmp_path / "runs", out=out)) == 0
     note = f"sub_steps 4 (now auto: {sc.n_sub}), resolution 12 (now {sc.resolution:g})"
-    if sc.accuracy != 0.01:  # recorded before the key existed: its default, 0.01
-        note += f", accuracy 0.01 (now {sc.accuracy:g})"
     err = capsys.readouterr().err
     assert err.count("trained on other numerics or reward weights") == 2 and note in err, err
     with open(out / "comparison.csv") as f:
