@@ -272,12 +272,10 @@ def auto_sub_steps(s: "Scene") -> int:
 
     At least 1, at most ``AUTO_SUB_STEPS_MAX``."""
     a_max = contact_radius_max(s)
-    if math.isfinite(s.mu):
-        cells, c_travel = s.omega_R_max * s.dt / (a_max / s.resolution), C_TRAVEL
-    else:
-        dx = a_max / min(s.resolution, STICK_CELLS)
-        cells, c_travel = s.omega_R_max * s.dt / dx, C_TRAVEL_STICK
-    n = cells * math.sqrt(c_travel / s.accuracy)
+    finite = math.isfinite(s.mu)
+    per_radius = s.resolution if finite else min(s.resolution, STICK_CELLS)
+    cells = s.omega_R_max * s.dt / (a_max / per_radius)
+    n = cells * math.sqrt((C_TRAVEL if finite else C_TRAVEL_STICK) / s.accuracy)
     if 0.0 < s.runner_mass:
         omega_n = math.sqrt(2.0 * a_max * s.G_star / s.runner_mass)
         n = max(n, omega_n * s.dt * math.sqrt(C_RUNNER / s.accuracy))
@@ -337,7 +335,7 @@ def validate(scene: Scene) -> Scene:
                 raise ValueError(
                     f"scene key 'randomize': the draw {draw} gives an invalid scene: {e}"
                 ) from None
-    a_max = math.sqrt(s.R * (3 * s.N_max / (4 * s.E_star * math.sqrt(s.R))) ** (2 / 3))
+    a_max = contact_radius_max(s)
     if a_max > 0.5 * s.R:
         raise ValueError(
             f"scene keys 'N_max', 'E_star' and 'R' give a contact radius "

@@ -466,6 +466,8 @@ def write(rows, out="results", name="work_precision") -> dict:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     if env:
+        from rolling_env.studies.accuracy import TARGET_SLIP_PCT, TARGET_XSTAR_TOL
+
         ax1, ax2 = fig.add_subplot(gs[1, 0]), fig.add_subplot(gs[1, 1])
         _env_panel(
             ax1,
@@ -473,9 +475,17 @@ def write(rows, out="results", name="work_precision") -> dict:
             orders,
             "env_x",
             "final x* error [scene tolerances]",
-            [(1.0, "1 tolerance"), (0.1, "0.1 tolerance")],
+            [(1.0, "1 tolerance"), (TARGET_XSTAR_TOL, f"{TARGET_XSTAR_TOL:g} tolerance")],
         )
-        _env_panel(ax2, rows, orders, "env_slip", "relative slip-work (wear) error", [(0.02, "2%")])
+        slip_target = TARGET_SLIP_PCT / 100.0
+        _env_panel(
+            ax2,
+            rows,
+            orders,
+            "env_slip",
+            "relative slip-work (wear) error",
+            [(slip_target, f"{TARGET_SLIP_PCT:g}%")],
+        )
         ax1.set_title(
             "env episodes vs the accuracy reference: final runner position x*\n"
             "worst of Eq. 32 feedback, open loop, random; ringed: shipped settings",
